@@ -1,0 +1,3 @@
+from awda_bench.cli import main
+
+raise SystemExit(main())

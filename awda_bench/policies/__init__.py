@@ -1,0 +1,1 @@
+"""Policies (methods) behind one interface; see :mod:`awda_bench.policies.base`."""

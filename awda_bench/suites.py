@@ -1,0 +1,145 @@
+"""Suite definitions: the data files in ``tasks/<name>.toml``, read into frozen dataclasses.
+
+A suite names the ManiSkill env it runs, its tasks (each a ``task`` index passed to
+``env.reset(options={"task": ...})``), which tasks are held out for evaluation, the horizon, and the
+cameras a policy sees. Everything downstream (episode specs, workers, tables) starts from here.
+
+Example file (``tasks/pick_place.toml``)::
+
+    name = "pick_place"
+    env_id = "AWDA-PickPlace-v1"
+    display_name = "Pick-and-place"
+    control_freq_hz = 20
+    horizon_steps = 200
+    held_out = [14, 15]
+    episodes_per_task = 20
+    [camera]
+    height = 240
+    width = 320
+    [[tasks]]
+    index = 0
+    name = "milk->compartment 0"
+    family = "pick_place"
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
+
+SUITES_DIR = Path(__file__).resolve().parent.parent / "tasks"
+"""Where the suite definition files live (``tasks/`` at the project root)."""
+
+
+@dataclass(frozen=True)
+class TaskDef:
+    """One task (variation) of a suite."""
+
+    index: int
+    """Value of ``options["task"]`` at reset; unique within the suite."""
+    name: str
+    """Human-readable name, e.g. ``"can -> compartment 2"``."""
+    family: str
+    """Task family (``pick_place``, ``door``, ...): the column of Table S4."""
+
+
+@dataclass(frozen=True)
+class CameraDef:
+    """The third-person RGB camera a policy observes."""
+
+    height: int = 240
+    """Image height [px] (reference pick-and-place: 240)."""
+    width: int = 320
+    """Image width [px] (reference pick-and-place: 320)."""
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A task suite as read from ``tasks/<name>.toml``."""
+
+    name: str
+    """Name used on the command line (``--suite NAME``)."""
+    display_name: str
+    """Row label in Table S3."""
+    env_id: str
+    """Registered ManiSkill env id (one env serves every task of the suite)."""
+    control_freq_hz: int
+    """Control steps per simulated second."""
+    horizon_steps: int
+    """Control steps per episode."""
+    tasks: tuple[TaskDef, ...]
+    """All tasks, train and held out."""
+    held_out: tuple[int, ...]
+    """Task indices evaluated by ``run`` (non-learned methods too)."""
+    episodes_per_task: int
+    """Evaluation episodes per held-out task per snapshot (paper: 20)."""
+    camera: CameraDef
+    """Third-person observation camera."""
+    path: Path
+    """The file this suite was read from."""
+
+    @property
+    def horizon_s(self) -> float:
+        """Episode length [s]."""
+        return self.horizon_steps / self.control_freq_hz
+
+    def task(self, index: int) -> TaskDef:
+        for t in self.tasks:
+            if t.index == index:
+                return t
+        raise UnknownChoiceError(f"task of suite {self.name!r}", index, [t.index for t in self.tasks])
+
+    @property
+    def train_tasks(self) -> tuple[TaskDef, ...]:
+        return tuple(t for t in self.tasks if t.index not in self.held_out)
+
+    @property
+    def eval_tasks(self) -> tuple[TaskDef, ...]:
+        return tuple(self.task(i) for i in self.held_out)
+
+
+def available_suites(directory: Path = SUITES_DIR) -> list[str]:
+    """Names of the suites defined in ``directory``."""
+    return sorted(p.stem for p in directory.glob("*.toml"))
+
+
+def load_suite(name: str, directory: Path = SUITES_DIR) -> Suite:
+    """Read ``directory/<name>.toml``; unknown names list the valid ones."""
+    path = directory / f"{name}.toml"
+    if not path.is_file():
+        raise UnknownChoiceError("suite", name, available_suites(directory) or ["(none defined)"])
+    try:
+        raw = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise CorruptFileError(f"suite file {path} is not valid TOML ({exc}); fix or restore it") from exc
+    try:
+        tasks = tuple(
+            TaskDef(index=int(t["index"]), name=str(t["name"]), family=str(t["family"]))
+            for t in raw["tasks"]
+        )
+        suite = Suite(
+            name=str(raw["name"]),
+            display_name=str(raw.get("display_name", raw["name"])),
+            env_id=str(raw["env_id"]),
+            control_freq_hz=int(raw["control_freq_hz"]),
+            horizon_steps=int(raw["horizon_steps"]),
+            tasks=tasks,
+            held_out=tuple(int(i) for i in raw["held_out"]),
+            episodes_per_task=int(raw.get("episodes_per_task", 20)),
+            camera=CameraDef(**raw.get("camera", {})),
+            path=path,
+        )
+    except (KeyError, TypeError, ValueError) as exc:
+        raise CorruptFileError(f"suite file {path} is missing or mistypes a field ({exc!r})") from exc
+    indices = [t.index for t in suite.tasks]
+    if len(set(indices)) != len(indices):
+        raise CorruptFileError(f"suite file {path} repeats a task index")
+    for i in suite.held_out:
+        if i not in indices:
+            raise UsageError(f"suite file {path}: held-out task {i} is not among its tasks {indices}")
+    if suite.name != name:
+        raise CorruptFileError(f"suite file {path} declares name {suite.name!r}; rename one of them")
+    return suite

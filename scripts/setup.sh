@@ -1,0 +1,81 @@
+#!/usr/bin/env bash
+# One entry point for a fresh machine:
+#
+#   bash scripts/setup.sh quick   # set up, then run the main job on a small default and write reports/
+#   bash scripts/setup.sh test    # set up, then run the test suite (tox)
+#   bash scripts/setup.sh         # set up only
+#
+# Set-up = (1) a Vulkan device SAPIEN accepts (on a GPU-less Debian 12 that is Mesa >= 24.3 from
+# bookworm-backports), (2) tox, (3) the project's environment .venv (owned by tox, shared by all
+# tox envs so torch is installed once). Every step is idempotent.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+what="${1:-setup}"
+PY="${PYTHON:-python3}"
+
+log() { printf '[setup] %s\n' "$*"; }
+
+mesa_version() {
+  dpkg-query -W -f='${Version}' mesa-vulkan-drivers 2>/dev/null | sed -E 's/^[0-9]+://; s/[-~+].*//' || true
+}
+
+version_ge() { [ "$(printf '%s\n%s\n' "$2" "$1" | sort -V | head -n1)" = "$2" ]; }
+
+ensure_renderer() {
+  if [ -n "${AWDA_SKIP_RENDERER_SETUP:-}" ]; then log "renderer set-up skipped (AWDA_SKIP_RENDERER_SETUP)"; return; fi
+  if command -v nvidia-smi >/dev/null 2>&1 && nvidia-smi -L >/dev/null 2>&1; then
+    log "NVIDIA GPU present: SAPIEN renders on it"; return
+  fi
+  local have; have="$(mesa_version)"
+  if [ -n "$have" ] && version_ge "$have" 24.3; then
+    log "Mesa lavapipe $have present (>= 24.3)"; return
+  fi
+  local id="" codename=""
+  if [ -r /etc/os-release ]; then . /etc/os-release; id="${ID:-}"; codename="${VERSION_CODENAME:-}"; fi
+  local sudo=""
+  if [ "$(id -u)" != 0 ]; then
+    if command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null; then sudo="sudo -n"; fi
+  fi
+  if [ "$id" = debian ] && [ "$codename" = bookworm ]; then
+    if [ "$(id -u)" != 0 ] && [ -z "$sudo" ]; then
+      log "ERROR: SAPIEN needs Mesa >= 24.3 (have '${have:-none}'). As root run:"
+      log "  printf 'Types: deb\nURIs: http://deb.debian.org/debian\nSuites: bookworm-backports\nComponents: main\nSigned-By: /usr/share/keyrings/debian-archive-keyring.gpg\n' > /etc/apt/sources.list.d/bookworm-backports.sources && apt-get update && apt-get install -y -t bookworm-backports mesa-vulkan-drivers libvulkan1"
+      exit 1
+    fi
+    log "installing mesa-vulkan-drivers from bookworm-backports (Debian 12's Mesa ${have:-none} is too old for SAPIEN)"
+    if ! grep -rqs bookworm-backports /etc/apt/sources.list /etc/apt/sources.list.d/; then
+      printf 'Types: deb\nURIs: http://deb.debian.org/debian\nSuites: bookworm-backports\nComponents: main\nSigned-By: /usr/share/keyrings/debian-archive-keyring.gpg\n' \
+        | $sudo tee /etc/apt/sources.list.d/bookworm-backports.sources >/dev/null
+    fi
+    $sudo apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq -t bookworm-backports mesa-vulkan-drivers libvulkan1 >/dev/null
+    log "Mesa $(mesa_version) installed"
+  elif [ "$id" = ubuntu ] || [ "$id" = debian ]; then
+    if [ "$(id -u)" = 0 ] || [ -n "$sudo" ]; then
+      DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null || true
+    fi
+    have="$(mesa_version)"
+    if [ -z "$have" ] || ! version_ge "$have" 24.3; then
+      log "ERROR: SAPIEN needs a GPU driver or Mesa >= 24.3 (have '${have:-none}'): install mesa-vulkan-drivers >= 24.3 (Ubuntu >= 24.04 ships it)"
+      exit 1
+    fi
+  else
+    log "WARNING: cannot check the Vulkan driver on '$id'; 'python -m awda_bench doctor' will tell"
+  fi
+}
+
+ensure_tox() {
+  if "$PY" -m tox --version >/dev/null 2>&1; then return; fi
+  log "installing tox for $PY"
+  "$PY" -m pip install -q --disable-pip-version-check 'tox>=4.11' 2>/dev/null \
+    || "$PY" -m pip install -q --user --disable-pip-version-check 'tox>=4.11'
+}
+
+ensure_renderer
+ensure_tox
+case "$what" in
+  setup) "$PY" -m tox run -e py --notest ;;
+  quick) "$PY" -m tox run -e quick ;;
+  test)  "$PY" -m tox run -e py,smoke ;;
+  *) echo "usage: bash scripts/setup.sh [setup|quick|test]" >&2; exit 2 ;;
+esac
