@@ -80,6 +80,9 @@ class Suite:
     """Third-person observation camera."""
     path: Path
     """The file this suite was read from."""
+    episode_unit: str = "task"
+    """``"task"``: ``episodes_per_task`` per held-out task; ``"family"``: that many per family,
+    variations cycled deterministically (MOSAIC, Table S4)."""
 
     @property
     def horizon_s(self) -> float:
@@ -131,6 +134,7 @@ def load_suite(name: str, directory: Path = SUITES_DIR) -> Suite:
             episodes_per_task=int(raw.get("episodes_per_task", 20)),
             camera=CameraDef(**raw.get("camera", {})),
             path=path,
+            episode_unit=str(raw.get("episode_unit", "task")),
         )
     except (KeyError, TypeError, ValueError) as exc:
         raise CorruptFileError(f"suite file {path} is missing or mistypes a field ({exc!r})") from exc
