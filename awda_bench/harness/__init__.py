@@ -1,0 +1,13 @@
+"""The evaluation harness: suite -> seeded episode specs -> workers -> records -> store -> report.
+
+Each arrow is one module:
+
+- :mod:`.episode_specs` fixes the episode list and the protocol fingerprint before scheduling;
+- :mod:`.methods` turns a method name (and a snapshot) into a :class:`~awda_bench.policies.base.Policy`;
+- :mod:`.env_factory` builds the one env a worker reuses;
+- :mod:`.episode_runner` plays one episode into an :class:`.episode_record.EpisodeRecord`;
+- :mod:`.worker_pool` runs episodes in processes with a watchdog;
+- :mod:`.results_store` keeps one SQLite row per episode, keyed for resume;
+- :mod:`.sweep` ties them together for ``python -m awda_bench run``;
+- :mod:`.aggregate`, :mod:`.tables`, :mod:`.figures`, :mod:`.report` turn the rows into tables.
+"""

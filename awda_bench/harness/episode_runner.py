@@ -1,0 +1,110 @@
+"""Play one episode: reset the env to a spec, loop ``policy.act`` / ``env.step``, judge it.
+
+::
+
+    env.reset(seed=spec.seed, options={"task": spec.task})     t = 0
+    policy.reset(ctx)
+    a_t = policy.act(obs_t); obs_{t+1}, info_{t+1} = env.step(a_t)   t = 0 .. T-1
+        stop after T = suite.horizon_steps steps, or once policy.done
+    success_once   = any_t info_t["success"]      success_at_end = info_T["success"]
+    reached/grasped = info_T["reached"/"grasped"] (the envs latch them), None if absent
+
+Exceptions are *not* caught here: the worker records them as errors with their traceback.
+"""
+
+from __future__ import annotations
+
+import random
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
+from awda_bench.policies.base import EpisodeContext, EpisodeSpec, Policy
+from awda_bench.suites import Suite
+
+FrameHook = Callable[[Any], None]
+"""Called with the env after reset and after every step (video capture); ``None`` for none."""
+
+
+def info_flag(info: dict[str, Any], key: str) -> bool | None:
+    """``info[key]`` of env 0 as a bool (tensors, arrays and scalars alike); ``None`` if absent."""
+    if key not in info:
+        return None
+    value = info[key]
+    if hasattr(value, "detach"):
+        value = value.detach().cpu().numpy()
+    return bool(np.asarray(value).reshape(-1)[0])
+
+
+def seed_globals(seed: int) -> None:
+    """Seed Python's, NumPy's and (if loaded) torch's global generators for one episode."""
+    random.seed(seed)
+    np.random.seed(seed)
+    import sys
+
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.manual_seed(seed)
+
+
+def run_episode(
+    env: Any,
+    policy: Policy,
+    spec: EpisodeSpec,
+    suite: Suite,
+    *,
+    method: str,
+    snapshot: str,
+    on_frame: FrameHook | None = None,
+) -> EpisodeRecord:
+    """Play ``spec`` with ``policy`` on ``env`` and return its record (status ok)."""
+    t_start = time.perf_counter()
+    seed_globals(spec.seed)
+    obs, info = env.reset(seed=spec.seed, options={"task": spec.task})
+    env_time = time.perf_counter() - t_start
+    if on_frame is not None:
+        on_frame(env)
+    t0 = time.perf_counter()
+    policy.reset(EpisodeContext(env=env.unwrapped, spec=spec))
+    act_time = time.perf_counter() - t0
+
+    success_once = False
+    success_now = bool(info_flag(info, "success"))
+    steps = 0
+    while steps < suite.horizon_steps and not policy.done:
+        t0 = time.perf_counter()
+        action = policy.act(obs)
+        t1 = time.perf_counter()
+        obs, _reward, _terminated, _truncated, info = env.step(action)
+        env_time += time.perf_counter() - t1
+        act_time += t1 - t0
+        steps += 1
+        success_now = bool(info_flag(info, "success"))
+        success_once = success_once or success_now
+        if on_frame is not None:
+            on_frame(env)
+
+    waypoints = policy.waypoints
+    return EpisodeRecord(
+        suite=spec.suite,
+        task=spec.task,
+        family=suite.task(spec.task).family,
+        episode=spec.episode,
+        seed=spec.seed,
+        demo_seed=spec.demo_seed,
+        method=method,
+        snapshot=snapshot,
+        status=STATUS_OK,
+        success_once=success_once,
+        success_at_end=success_now,
+        reached=info_flag(info, "reached"),
+        grasped=info_flag(info, "grasped"),
+        steps=steps,
+        wall_time_s=time.perf_counter() - t_start,
+        act_time_s=act_time,
+        env_time_s=env_time,
+        waypoints=None if waypoints is None else np.asarray(waypoints, dtype=float).tolist(),
+    )

@@ -1,0 +1,113 @@
+"""The evaluation protocol and its episode list, fixed before any scheduling.
+
+Everything that decides whether two result tables are comparable goes into :class:`EvalProtocol`
+and its :attr:`~EvalProtocol.fingerprint`: the suite file's bytes, the horizon, the evaluated tasks,
+episodes per unit, the base seed and the harness's protocol version. The episode list follows from
+the protocol alone, so results never depend on the number of workers or on their order.
+
+Seeds are derived by hashing ``(suite, base seed, task, episode, role)``, never drawn from a shared
+generator: episode ``i`` of task ``t`` gets the same scene whatever else is evaluated.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass
+
+from awda_bench.errors import UsageError
+from awda_bench.policies.base import EpisodeSpec
+from awda_bench.suites import Suite
+
+PROTOCOL_VERSION = 1
+"""Bumped whenever the harness changes how an episode is played or judged."""
+
+EPISODE_UNITS = ("task", "family")
+"""How ``episodes`` is counted: per held-out task, or per family with variations cycled."""
+
+
+@dataclass(frozen=True)
+class EvalProtocol:
+    """What defines comparability of results; hashed into :attr:`fingerprint`."""
+
+    suite: str
+    """Suite name."""
+    suite_sha256: str
+    """SHA-256 of the suite file's bytes (tasks, horizon, held-out set, cameras)."""
+    horizon_steps: int
+    """Control steps per episode."""
+    eval_tasks: tuple[int, ...]
+    """Evaluated task indices, in suite order."""
+    episodes: int
+    """Episodes per evaluation unit (per task, or per family; see :attr:`episode_unit`)."""
+    episode_unit: str
+    """``"task"``: ``episodes`` per held-out task; ``"family"``: per family, variations cycled."""
+    base_seed: int
+    """Base seed every episode seed is derived from."""
+    protocol_version: int = PROTOCOL_VERSION
+    """Harness protocol version (see :data:`PROTOCOL_VERSION`)."""
+
+    @property
+    def fingerprint(self) -> str:
+        """First 16 hex digits of the SHA-256 of the protocol's canonical JSON."""
+        blob = json.dumps(asdict(self), sort_keys=True, separators=(",", ":")).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+    def to_json(self) -> str:
+        return json.dumps(asdict(self), sort_keys=True)
+
+
+def make_protocol(suite: Suite, *, episodes: int | None, base_seed: int) -> EvalProtocol:
+    """The protocol for evaluating ``suite``; ``episodes=None`` takes the suite's default."""
+    n = suite.episodes_per_task if episodes is None else episodes
+    if n < 1:
+        raise UsageError(f"--episodes must be at least 1 (got {n})")
+    if base_seed < 0:
+        raise UsageError(f"--seed must be non-negative (got {base_seed})")
+    unit = suite.episode_unit
+    if unit not in EPISODE_UNITS:
+        raise UsageError(f"suite {suite.name!r}: episode_unit {unit!r} is not one of {EPISODE_UNITS}")
+    return EvalProtocol(
+        suite=suite.name,
+        suite_sha256=hashlib.sha256(suite.path.read_bytes()).hexdigest(),
+        horizon_steps=suite.horizon_steps,
+        eval_tasks=tuple(t.index for t in suite.eval_tasks),
+        episodes=n,
+        episode_unit=unit,
+        base_seed=base_seed,
+    )
+
+
+def derive_seed(suite: str, base_seed: int, task: int, episode: int, role: str) -> int:
+    """A seed in ``[0, 2**31)`` from a hash of the episode's identity and ``role`` (agent/demo)."""
+    key = f"{suite}|{base_seed}|{task}|{episode}|{role}".encode()
+    return int.from_bytes(hashlib.sha256(key).digest()[:4], "little") & 0x7FFF_FFFF
+
+
+def build_episode_specs(suite: Suite, protocol: EvalProtocol) -> list[EpisodeSpec]:
+    """The full, ordered episode list of ``protocol`` (sorted by task, then episode index).
+
+    ``episode_unit == "task"``: episodes ``0..n-1`` of every evaluated task.
+    ``episode_unit == "family"``: episode ``i`` of a family runs its ``i % V``-th variation
+    (``V`` evaluated variations in suite order); its episode index stays ``i``.
+    """
+    pairs: list[tuple[int, int]] = []
+    if protocol.episode_unit == "task":
+        pairs = [(t, i) for t in protocol.eval_tasks for i in range(protocol.episodes)]
+    else:
+        families: dict[str, list[int]] = {}
+        for index in protocol.eval_tasks:
+            families.setdefault(suite.task(index).family, []).append(index)
+        for variations in families.values():
+            pairs += [(variations[i % len(variations)], i) for i in range(protocol.episodes)]
+    specs = [
+        EpisodeSpec(
+            suite=suite.name,
+            task=task,
+            episode=i,
+            seed=derive_seed(suite.name, protocol.base_seed, task, i, "agent"),
+            demo_seed=derive_seed(suite.name, protocol.base_seed, task, i, "demo"),
+        )
+        for task, i in pairs
+    ]
+    return sorted(specs, key=lambda s: (s.task, s.episode))

@@ -1,0 +1,169 @@
+"""Method registry: a name -> how to build its :class:`~awda_bench.policies.base.Policy`.
+
+Targets are ``"module:attribute"`` strings, imported only when a method is used (so the harness
+loads without torch models, and a spawned worker rebuilds a policy from plain strings). A
+non-learned method's target is called with no argument and counts as one snapshot
+(:data:`BUILTIN_SNAPSHOT`); a learned method's target is called with the snapshot file's path, and
+its snapshots are listed and checked with :mod:`awda_bench.models.snapshot` (or the method's own
+``list_snapshots``/``load_snapshot`` targets).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
+from awda_bench.policies.base import Policy
+
+BUILTIN_SNAPSHOT = "builtin"
+"""Snapshot hash recorded for non-learned methods."""
+
+DEFAULT_METHOD = "gt-waypoints"
+"""Evaluated when ``run`` is given no ``--method``."""
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """How to build one method's policy."""
+
+    name: str
+    """Name used with ``--method`` and as the table column."""
+    target: str
+    """``"module:attribute"`` of the policy class or factory."""
+    learned: bool = False
+    """True: evaluated per snapshot file from ``--checkpoints``; False: one snapshot."""
+    list_snapshots: str = "awda_bench.models.snapshot:list_snapshots"
+    """``"module:attribute"`` of ``list_snapshots(directory) -> list[Path]`` (oldest first)."""
+    load_snapshot: str = "awda_bench.models.snapshot:load_snapshot"
+    """``"module:attribute"`` of ``load_snapshot(path)``, raising on a corrupt file."""
+    description: str = ""
+    """One line for ``--help``."""
+
+
+@dataclass(frozen=True)
+class SnapshotRef:
+    """One snapshot to evaluate."""
+
+    sha256: str
+    """Content hash (first 16 hex digits), the snapshot's identity in the store."""
+    name: str
+    """File name (or ``"builtin"``)."""
+    path: str | None
+    """File path, ``None`` for non-learned methods."""
+    order: int
+    """Position in training order (0 = oldest listed)."""
+
+
+_REGISTRY: dict[str, MethodSpec] = {}
+
+
+def register_method(spec: MethodSpec) -> None:
+    """Add (or replace) a method; tests register fakes this way."""
+    _REGISTRY[spec.name] = spec
+
+
+def unregister_method(name: str) -> None:
+    _REGISTRY.pop(name, None)
+
+
+def method_names() -> list[str]:
+    return sorted(_REGISTRY)
+
+
+def get_method(name: str) -> MethodSpec:
+    if name not in _REGISTRY:
+        raise UnknownChoiceError("method", name, method_names())
+    return _REGISTRY[name]
+
+
+def resolve(target: str, *, what: str) -> Any:
+    """Import ``"module:attribute"``; a missing module or attribute is a one-line usage error."""
+    module_name, _, attribute = target.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ModuleNotFoundError as exc:
+        raise UsageError(f"{what} is not available: cannot import {module_name} ({exc})") from exc
+    try:
+        return getattr(module, attribute)
+    except AttributeError as exc:
+        raise UsageError(f"{what} is not available: {module_name} has no {attribute!r}") from exc
+
+
+def make_policy(spec: MethodSpec, snapshot: SnapshotRef) -> Policy:
+    """Build the policy of ``spec`` for ``snapshot`` (called inside workers)."""
+    factory = resolve(spec.target, what=f"method {spec.name!r}")
+    policy = factory(snapshot.path) if spec.learned else factory()
+    if not isinstance(policy, Policy):
+        raise UsageError(f"method {spec.name!r}: {spec.target} did not return a Policy")
+    return policy
+
+
+def file_sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()[:16]
+
+
+def select_snapshots(spec: MethodSpec, checkpoints: Path | None, last_n: int) -> list[SnapshotRef]:
+    """The snapshots to evaluate: the last ``last_n`` in ``checkpoints`` for learned methods.
+
+    Every selected file is loaded once here (and discarded) so that a corrupt snapshot is reported
+    before anything is written.
+    """
+    if not spec.learned:
+        if checkpoints is not None:
+            raise UsageError(f"method {spec.name!r} is not learned; drop --checkpoints")
+        return [SnapshotRef(sha256=BUILTIN_SNAPSHOT, name=BUILTIN_SNAPSHOT, path=None, order=0)]
+    if checkpoints is None:
+        raise UsageError(f"method {spec.name!r} is learned; pass --checkpoints DIR")
+    if last_n < 1:
+        raise UsageError(f"--snapshots must be at least 1 (got {last_n})")
+    if not checkpoints.is_dir():
+        raise UsageError(f"checkpoint directory {checkpoints} does not exist")
+    lister = resolve(spec.list_snapshots, what=f"snapshot listing for {spec.name!r}")
+    loader = resolve(spec.load_snapshot, what=f"snapshot loading for {spec.name!r}")
+    paths = [Path(p) for p in lister(checkpoints)]
+    if not paths:
+        raise UsageError(f"checkpoint directory {checkpoints} holds no snapshots of {spec.name!r}")
+    first = max(0, len(paths) - last_n)
+    refs = []
+    for order, path in enumerate(paths[first:], start=first):
+        try:
+            loader(path)
+        except CorruptFileError:
+            raise
+        except Exception as exc:  # any failure to load is a corrupt snapshot, reported as such
+            raise CorruptFileError(
+                f"snapshot {path} cannot be loaded ({type(exc).__name__}: {exc}); remove or replace it"
+            ) from exc
+        refs.append(SnapshotRef(sha256=file_sha256(path), name=path.name, path=str(path), order=order))
+    hashes = [r.sha256 for r in refs]
+    if len(set(hashes)) != len(hashes):
+        raise UsageError(f"checkpoint directory {checkpoints} holds identical snapshot files")
+    return refs
+
+
+for _spec in (
+    MethodSpec(
+        "gt-waypoints",
+        "awda_bench.policies.gt_waypoints:GTWaypointsPolicy",
+        description="privileged: ground-truth attributed waypoints executed by the primitives",
+    ),
+    MethodSpec(
+        "scripted",
+        "awda_bench.policies.scripted:ScriptedPolicy",
+        description="privileged: scripted expert",
+    ),
+    MethodSpec(
+        "random",
+        "awda_bench.policies.random_policy:RandomPolicy",
+        description="uniform random actions (a floor for every table)",
+    ),
+):
+    register_method(_spec)

@@ -1,0 +1,241 @@
+"""The results store: one SQLite file (WAL) per run directory, one row per episode.
+
+Tables::
+
+    meta(key, value)                       schema version
+    protocols(fingerprint, suite, definition)      one protocol per suite per store
+    snapshots(protocol, method, snapshot, name, ord, learned, episodes_expected)   the plan
+    episodes(protocol, method, snapshot, task, episode, ...)   PRIMARY KEY of those five
+    runs(id, started_at, command, versions)
+
+Resume semantics: an episode whose row has status ``ok`` is finished and never re-run; a row with
+status ``error`` is re-run and replaced (``attempts`` counts the tries); a missing row is pending.
+Each record is committed as it arrives, so a killed run loses at most the episodes in flight.
+Every check (schema, protocol) happens before the first write, so a refused run leaves the file
+untouched.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import time
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from awda_bench.errors import CorruptFileError, ProtocolMismatchError, UsageError
+from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
+from awda_bench.harness.episode_specs import EvalProtocol
+from awda_bench.harness.methods import SnapshotRef
+
+STORE_NAME = "results.sqlite"
+"""File name of the store inside a run directory."""
+
+SCHEMA_VERSION = "1"
+"""Bumped on any incompatible schema change."""
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
+CREATE TABLE IF NOT EXISTS protocols (
+    fingerprint TEXT PRIMARY KEY,
+    suite TEXT NOT NULL UNIQUE,
+    definition TEXT NOT NULL
+);
+CREATE TABLE IF NOT EXISTS snapshots (
+    protocol TEXT NOT NULL REFERENCES protocols(fingerprint),
+    method TEXT NOT NULL,
+    snapshot TEXT NOT NULL,
+    name TEXT NOT NULL,
+    ord INTEGER NOT NULL,
+    learned INTEGER NOT NULL,
+    episodes_expected INTEGER NOT NULL,
+    PRIMARY KEY (protocol, method, snapshot)
+);
+CREATE TABLE IF NOT EXISTS episodes (
+    protocol TEXT NOT NULL REFERENCES protocols(fingerprint),
+    method TEXT NOT NULL,
+    snapshot TEXT NOT NULL,
+    suite TEXT NOT NULL,
+    task INTEGER NOT NULL,
+    family TEXT NOT NULL,
+    episode INTEGER NOT NULL,
+    seed INTEGER NOT NULL,
+    demo_seed INTEGER NOT NULL,
+    success_once INTEGER,
+    success_at_end INTEGER,
+    reached INTEGER,
+    grasped INTEGER,
+    steps INTEGER NOT NULL,
+    wall_time_s REAL NOT NULL,
+    act_time_s REAL NOT NULL,
+    env_time_s REAL NOT NULL,
+    status TEXT NOT NULL CHECK (status IN ('ok', 'error')),
+    error TEXT,
+    waypoints TEXT,
+    attempts INTEGER NOT NULL DEFAULT 1,
+    finished_at REAL NOT NULL,
+    PRIMARY KEY (protocol, method, snapshot, task, episode)
+);
+CREATE TABLE IF NOT EXISTS runs (
+    id INTEGER PRIMARY KEY AUTOINCREMENT,
+    started_at REAL NOT NULL,
+    protocol TEXT NOT NULL,
+    method TEXT NOT NULL,
+    command TEXT NOT NULL,
+    versions TEXT NOT NULL
+);
+"""
+
+EPISODE_COLUMNS = (
+    "protocol", "method", "snapshot", "suite", "task", "family", "episode", "seed", "demo_seed",
+    "success_once", "success_at_end", "reached", "grasped", "steps", "wall_time_s", "act_time_s",
+    "env_time_s", "status", "error", "waypoints",
+)  # fmt: skip
+
+
+def _bool(value: bool | None) -> int | None:
+    return None if value is None else int(value)
+
+
+class ResultsStore:
+    """Open (or create) ``run_dir/results.sqlite``. ``create=False`` refuses a missing store."""
+
+    def __init__(self, run_dir: Path, *, create: bool) -> None:
+        self.path = Path(run_dir) / STORE_NAME
+        if not self.path.is_file():
+            if not create:
+                raise UsageError(
+                    f"no results store at {self.path}; run `python -m awda_bench run` first or pass --runs"
+                )
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._conn = sqlite3.connect(self.path, timeout=30)
+        try:
+            self._check_or_init(create)
+        except BaseException:
+            self._conn.close()
+            raise
+
+    def _check_or_init(self, create: bool) -> None:
+        try:
+            tables = {r[0] for r in self._conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+        except sqlite3.DatabaseError as exc:
+            raise CorruptFileError(f"{self.path} is not a results store ({exc}); move it away") from exc
+        if tables:
+            if "meta" not in tables:
+                raise CorruptFileError(f"{self.path} is not an awda_bench results store; move it away")
+            row = self._conn.execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()
+            if row is None or row[0] != SCHEMA_VERSION:
+                found = None if row is None else row[0]
+                raise CorruptFileError(
+                    f"{self.path} has store schema {found}, this version reads {SCHEMA_VERSION}; "
+                    "use another run directory"
+                )
+            if create:
+                self._conn.execute("PRAGMA journal_mode=WAL")
+            return
+        if not create:
+            raise CorruptFileError(f"{self.path} is empty; run `python -m awda_bench run` first")
+        self._conn.execute("PRAGMA journal_mode=WAL")
+        with self._conn:
+            self._conn.executescript(_SCHEMA)
+            self._conn.execute("INSERT INTO meta VALUES ('schema_version', ?)", (SCHEMA_VERSION,))
+
+    def close(self) -> None:
+        self._conn.close()
+
+    def __enter__(self) -> ResultsStore:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- protocol and plan -------------------------------------------------------------------
+
+    def check_protocol(self, protocol: EvalProtocol) -> None:
+        """Raise if the store holds ``protocol.suite`` under another protocol (writes nothing)."""
+        row = self._conn.execute(
+            "SELECT fingerprint, definition FROM protocols WHERE suite=?", (protocol.suite,)
+        ).fetchone()
+        if row is not None and row[0] != protocol.fingerprint:
+            theirs = json.loads(row[1])
+            ours = json.loads(protocol.to_json())
+            diff = ", ".join(
+                f"{k}={theirs.get(k)!r}->{ours[k]!r}" for k in sorted(ours) if theirs.get(k) != ours[k]
+            )
+            raise ProtocolMismatchError(
+                f"{self.path} holds suite {protocol.suite!r} under protocol {row[0]}, this run is "
+                f"{protocol.fingerprint} ({diff}); use another --out or the same settings"
+            )
+
+    def plan(
+        self, protocol: EvalProtocol, method: str, learned: bool, snapshots: Iterable[SnapshotRef],
+        episodes_expected: int, command: str, versions: dict[str, str],
+    ) -> None:  # fmt: skip
+        """Record the protocol, the snapshots about to be evaluated and this run's invocation."""
+        self.check_protocol(protocol)
+        with self._conn:
+            self._conn.execute(
+                "INSERT OR IGNORE INTO protocols VALUES (?, ?, ?)",
+                (protocol.fingerprint, protocol.suite, protocol.to_json()),
+            )
+            for snap in snapshots:
+                self._conn.execute(
+                    "INSERT OR REPLACE INTO snapshots VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    (protocol.fingerprint, method, snap.sha256, snap.name, snap.order, int(learned),
+                     episodes_expected),
+                )  # fmt: skip
+            self._conn.execute(
+                "INSERT INTO runs (started_at, protocol, method, command, versions) VALUES (?, ?, ?, ?, ?)",
+                (time.time(), protocol.fingerprint, method, command, json.dumps(versions, sort_keys=True)),
+            )
+
+    # --- episodes ------------------------------------------------------------------------------
+
+    def finished_keys(self, protocol: str, method: str, snapshot: str) -> set[tuple[int, int]]:
+        """``(task, episode)`` of the episodes already recorded with status ok."""
+        rows = self._conn.execute(
+            "SELECT task, episode FROM episodes WHERE protocol=? AND method=? AND snapshot=? AND status=?",
+            (protocol, method, snapshot, STATUS_OK),
+        )
+        return {(int(t), int(e)) for t, e in rows}
+
+    def record(self, protocol: str, rec: EpisodeRecord) -> None:
+        """Insert or replace one episode's row and commit; an ok row is never overwritten."""
+        values = (
+            protocol, rec.method, rec.snapshot, rec.suite, rec.task, rec.family, rec.episode,
+            rec.seed, rec.demo_seed, _bool(rec.success_once), _bool(rec.success_at_end),
+            _bool(rec.reached), _bool(rec.grasped), rec.steps, rec.wall_time_s, rec.act_time_s,
+            rec.env_time_s, rec.status, rec.error,
+            None if rec.waypoints is None else json.dumps(rec.waypoints),
+        )  # fmt: skip
+        placeholders = ", ".join("?" * len(EPISODE_COLUMNS))
+        columns = ", ".join(EPISODE_COLUMNS)
+        updates = ", ".join(f"{c}=excluded.{c}" for c in EPISODE_COLUMNS[3:])
+        with self._conn:
+            self._conn.execute(
+                f"INSERT INTO episodes ({columns}, attempts, finished_at) VALUES ({placeholders}, 1, ?) "
+                "ON CONFLICT (protocol, method, snapshot, task, episode) DO UPDATE SET "
+                f"{updates}, attempts=episodes.attempts+1, finished_at=excluded.finished_at "
+                "WHERE episodes.status != 'ok'",
+                (*values, time.time()),
+            )
+
+    # --- reading -------------------------------------------------------------------------------
+
+    def episodes(self) -> pd.DataFrame:
+        return pd.read_sql_query("SELECT * FROM episodes ORDER BY protocol, method, snapshot, task, episode", self._conn)
+
+    def snapshots(self) -> pd.DataFrame:
+        return pd.read_sql_query("SELECT * FROM snapshots ORDER BY protocol, method, ord", self._conn)
+
+    def protocols(self) -> pd.DataFrame:
+        return pd.read_sql_query("SELECT * FROM protocols ORDER BY suite", self._conn)
+
+    def runs(self) -> pd.DataFrame:
+        return pd.read_sql_query("SELECT * FROM runs ORDER BY id", self._conn)
+
+    def raw(self, sql: str, params: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
+        return list(self._conn.execute(sql, params))

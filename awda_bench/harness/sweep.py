@@ -1,0 +1,203 @@
+"""A sweep: every pending episode of (suite, method, snapshots) played and stored.
+
+Order of work, so that bad input never touches the store::
+
+    load suite -> protocol + episode specs -> method -> snapshots (each loaded once)
+    -> open store, check protocol            (all of the above may refuse; nothing written yet)
+    -> plan (protocol, snapshots, run row) -> skip finished (status ok) -> workers -> record each
+"""
+
+from __future__ import annotations
+
+import platform
+import sys
+import time
+from dataclasses import dataclass, field
+from importlib import metadata
+from pathlib import Path
+
+from tqdm import tqdm
+
+from awda_bench.errors import UsageError
+from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
+from awda_bench.harness.episode_specs import EvalProtocol, build_episode_specs, make_protocol
+from awda_bench.harness.methods import MethodSpec, SnapshotRef, get_method, select_snapshots
+from awda_bench.harness.results_store import ResultsStore
+from awda_bench.harness.worker_pool import DEFAULT_ENV_FACTORY, Job, WorkerConfig, WorkerPool, run_inline
+from awda_bench.suites import SUITES_DIR, Suite, load_suite
+
+VERSIONED_PACKAGES = ("awda_bench", "mani-skill", "sapien", "mink", "mujoco", "gymnasium", "torch", "numpy")
+"""Packages whose versions are recorded with every run and printed in the report header."""
+
+
+def software_versions() -> dict[str, str]:
+    versions = {"python": platform.python_version()}
+    for name in VERSIONED_PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions
+
+
+@dataclass(frozen=True)
+class SweepConfig:
+    """Everything ``python -m awda_bench run`` decides."""
+
+    suite: str
+    """Suite name."""
+    method: str
+    """Method name."""
+    out: Path
+    """Run directory (holds ``results.sqlite``)."""
+    checkpoints: Path | None = None
+    """Snapshot directory of a learned method."""
+    snapshots: int = 10
+    """Evaluate the last this-many snapshots of a learned method."""
+    episodes: int | None = None
+    """Episodes per evaluation unit; ``None``: the suite's default (paper protocol: 20)."""
+    seed: int = 0
+    """Base seed of the episode seeds."""
+    workers: int = 1
+    """Worker processes (0: play in this process, no watchdog)."""
+    tasks: tuple[int, ...] = ()
+    """Restrict this invocation to these evaluated tasks (the protocol still covers all)."""
+    episode_timeout_s: float = 600.0
+    """Watchdog limit per episode [s]."""
+    suites_dir: Path = SUITES_DIR
+    """Where suite files live."""
+    env_factory: str = DEFAULT_ENV_FACTORY
+    """``"module:attribute"`` of the env factory."""
+    progress: bool = True
+    """Show a progress bar on stderr."""
+    command: str = field(default_factory=lambda: " ".join(sys.argv))
+    """The command line, recorded in the store."""
+
+
+@dataclass(frozen=True)
+class SweepPlan:
+    """A validated sweep, ready to run."""
+
+    suite: Suite
+    protocol: EvalProtocol
+    method: MethodSpec
+    snapshots: tuple[SnapshotRef, ...]
+    jobs: tuple[Job, ...]
+    """Every episode of the protocol restricted to ``config.tasks``, for every snapshot."""
+    expected_per_snapshot: int
+    """Episodes the protocol expects per snapshot."""
+
+
+@dataclass(frozen=True)
+class SweepResult:
+    planned: int
+    """Episodes in the sweep."""
+    skipped: int
+    """Already finished (status ok) before this invocation."""
+    ran: int
+    """Played by this invocation."""
+    errors: int
+    """Of those, recorded as errors."""
+    successes: int
+    """Of those, successes (success_once)."""
+    wall_time_s: float
+    """Wall time of the worker phase [s]."""
+    episode_time_s: float
+    """Sum of the played episodes' own wall times [s]."""
+    respawns: int
+    """Workers replaced after a hang or crash."""
+
+
+def prepare_sweep(config: SweepConfig) -> SweepPlan:
+    """Validate the whole sweep; raises a one-line error on bad input and writes nothing."""
+    suite = load_suite(config.suite, config.suites_dir)
+    protocol = make_protocol(suite, episodes=config.episodes, base_seed=config.seed)
+    specs = build_episode_specs(suite, protocol)
+    for task in config.tasks:
+        if task not in protocol.eval_tasks:
+            suite.task(task)  # unknown task: lists the valid ones
+            raise UsageError(
+                f"task {task} of suite {suite.name!r} is not evaluated; choose among {list(protocol.eval_tasks)}"
+            )
+    if config.tasks:
+        specs = [s for s in specs if s.task in config.tasks]
+    if config.workers < 0:
+        raise UsageError(f"--workers must be >= 0 (got {config.workers})")
+    if config.episode_timeout_s <= 0:
+        raise UsageError(f"--episode-timeout must be positive (got {config.episode_timeout_s})")
+    method = get_method(config.method)
+    snapshots = tuple(select_snapshots(method, config.checkpoints, config.snapshots))
+    jobs = tuple(Job(spec=s, method=method, snapshot=snap) for snap in snapshots for s in specs)
+    expected = len(build_episode_specs(suite, protocol))
+    return SweepPlan(suite, protocol, method, snapshots, jobs, expected)
+
+
+def run_sweep(config: SweepConfig) -> SweepResult:
+    """Run every pending episode of the sweep, recording each as it arrives."""
+    plan = prepare_sweep(config)
+    fingerprint = plan.protocol.fingerprint
+    with ResultsStore(config.out, create=True) as store:
+        store.check_protocol(plan.protocol)
+        store.plan(
+            plan.protocol, plan.method.name, plan.method.learned, plan.snapshots,
+            plan.expected_per_snapshot, config.command, software_versions(),
+        )  # fmt: skip
+        finished = {
+            snap.sha256: store.finished_keys(fingerprint, plan.method.name, snap.sha256)
+            for snap in plan.snapshots
+        }
+        pending = [
+            j for j in plan.jobs if (j.spec.task, j.spec.episode) not in finished[j.snapshot.sha256]
+        ]
+        skipped = len(plan.jobs) - len(pending)
+        done_ok = store.raw(
+            "SELECT COUNT(*), COALESCE(SUM(success_once), 0) FROM episodes "
+            "WHERE protocol=? AND method=? AND status='ok'",
+            (fingerprint, plan.method.name),
+        )[0]
+        counts = {"ok": int(done_ok[0]), "success": int(done_ok[1]), "errors": 0, "ran": 0}
+        episode_time = 0.0
+        bar = tqdm(
+            total=len(plan.jobs), initial=skipped, disable=not config.progress, unit="ep",
+            desc=f"{plan.suite.name}/{plan.method.name}", dynamic_ncols=True,
+        )  # fmt: skip
+
+        def on_result(record: EpisodeRecord) -> None:
+            nonlocal episode_time
+            store.record(fingerprint, record)
+            counts["ran"] += 1
+            episode_time += record.wall_time_s
+            if record.status == STATUS_OK:
+                counts["ok"] += 1
+                counts["success"] += int(bool(record.success_once))
+            else:
+                counts["errors"] += 1
+                last = (record.error or "").strip().splitlines()[-1:] or [""]
+                bar.write(f"error: task {record.task} episode {record.episode}: {last[0]}")
+            rate = counts["success"] / counts["ok"] if counts["ok"] else 0.0
+            bar.set_postfix(success=f"{rate:.2f}", errors=counts["errors"], refresh=False)
+            bar.update(1)
+
+        worker_config = WorkerConfig(
+            suite_name=plan.suite.name,
+            suites_dir=str(config.suites_dir),
+            env_factory=config.env_factory,
+            episode_timeout_s=config.episode_timeout_s,
+        )
+        t0 = time.perf_counter()
+        respawns = 0
+        try:
+            if pending and config.workers == 0:
+                run_inline(pending, worker_config, on_result)
+            elif pending:
+                pool = WorkerPool(worker_config, config.workers, plan.suite)
+                pool.run(pending, on_result)
+                respawns = pool.respawns
+        finally:
+            bar.close()
+        wall = time.perf_counter() - t0
+    return SweepResult(
+        planned=len(plan.jobs), skipped=skipped, ran=counts["ran"], errors=counts["errors"],
+        successes=counts["success"] - int(done_ok[1]), wall_time_s=wall,
+        episode_time_s=episode_time, respawns=respawns,
+    )  # fmt: skip
