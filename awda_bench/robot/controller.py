@@ -1,0 +1,132 @@
+"""ManiSkill controllers for the 4-D action space: mink IK for the arm, a binary gripper.
+
+Seated where ManiSkill seats its own IK controller: :class:`MinkEEPosController` subclasses
+``PDJointPosController`` (joint PD drives do the tracking) and is chosen through its config's
+``controller_cls``. Per control step and env::
+
+    a[0:3] in [-1,1] --clip--> delta = a * max_step_m  (world axes, rotated into the base frame)
+    p_now = FK(q_measured)                              (MuJoCo model of the same URDF)
+    p*    = clip(p_now + delta, workspace_low_m, workspace_high_m)
+    q*    = mink IK(q_measured -> p*, gripper pointing down, joint limits)   -> joint drive targets
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+from gymnasium import spaces
+from mani_skill.agents.controllers.pd_joint_pos import (
+    PDJointPosController,
+    PDJointPosControllerConfig,
+    PDJointPosMimicController,
+    PDJointPosMimicControllerConfig,
+)
+
+from awda_bench.robot.ik import IKConfig, PandaIK
+
+
+class MinkEEPosController(PDJointPosController):
+    """TCP position deltas in [-1, 1]^3 -> arm joint targets by mink differential IK."""
+
+    config: MinkEEPosControllerConfig
+
+    def _initialize_joints(self) -> None:
+        super()._initialize_joints()
+        n = self.scene.num_envs
+        self.solvers = [PandaIK(self.config.ik) for _ in range(n)]
+        """One IK instance (MuJoCo data + mink tasks) per env."""
+        self._low = np.asarray(self.config.workspace_low_m, dtype=np.float64)
+        self._high = np.asarray(self.config.workspace_high_m, dtype=np.float64)
+        self.last_target_pos = np.zeros((n, 3))
+        """TCP targets of the last step, base frame [m] (after workspace clipping)."""
+        self.last_ik_error = np.zeros(n)
+        """Remaining model TCP error of the last IK solve per env [m]."""
+
+    def _initialize_action_space(self) -> None:
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+
+    def _base_rotation(self) -> np.ndarray:
+        """(n, 3, 3) rotation of the robot base in the world."""
+        pose = self.articulation.root.pose
+        return pose.to_transformation_matrix()[:, :3, :3].cpu().numpy().astype(np.float64)
+
+    def set_action(self, action: torch.Tensor) -> None:
+        self._step = 0
+        self._start_qpos = self.qpos
+        commands = np.clip(action.detach().cpu().numpy().astype(np.float64), -1.0, 1.0)
+        delta_world = commands * self.config.max_step_m
+        rotation = self._base_rotation()
+        qpos = self.articulation.get_qpos().cpu().numpy()
+        targets = self._start_qpos.cpu().numpy().copy()
+        for i, solver in enumerate(self.solvers):
+            delta_base = rotation[i % len(rotation)].T @ delta_world[i]
+            q_arm, target, error = solver.solve_delta(qpos[i], delta_base, self._low, self._high)
+            targets[i] = q_arm
+            self.last_target_pos[i] = target
+            self.last_ik_error[i] = error
+        self._target_qpos = torch.as_tensor(targets, dtype=self._start_qpos.dtype, device=self.device)
+        self.set_drive_targets(self._target_qpos)
+
+
+@dataclass
+class MinkEEPosControllerConfig(PDJointPosControllerConfig):
+    """Arm controller of ``panda_awda`` (``lower``/``upper`` are unused: the action is normalized)."""
+
+    max_step_m: float = 0.02
+    """TCP displacement commanded by a unit action component in one control step [m]
+    (at 20 Hz control: 0.4 m/s per axis at most)."""
+    workspace_low_m: tuple[float, float, float] = (0.20, -0.50, 0.01)
+    """Lower corner of the box TCP targets are clipped to, robot base frame [m]."""
+    workspace_high_m: tuple[float, float, float] = (0.85, 0.50, 0.70)
+    """Upper corner of that box, robot base frame [m]."""
+    ik: IKConfig = field(default_factory=IKConfig)
+    """mink solve settings."""
+    normalize_action: bool = False
+    controller_cls = MinkEEPosController
+
+    def __post_init__(self) -> None:
+        if not self.max_step_m > 0:
+            raise ValueError(f"max_step_m must be > 0, got {self.max_step_m}")
+        if any(lo >= hi for lo, hi in zip(self.workspace_low_m, self.workspace_high_m, strict=True)):
+            raise ValueError(
+                f"workspace_low_m {self.workspace_low_m} must be below workspace_high_m {self.workspace_high_m}"
+            )
+
+
+class BinaryGripperController(PDJointPosMimicController):
+    """One number per env: > 0 drives the fingers closed, <= 0 open."""
+
+    config: BinaryGripperControllerConfig
+
+    def _initialize_action_space(self) -> None:
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+
+    def set_action(self, action: torch.Tensor) -> None:
+        closed = action[:, :1] > 0
+        target = torch.where(
+            closed,
+            torch.full_like(action[:, :1], self.config.closed_qpos_m),
+            torch.full_like(action[:, :1], self.config.open_qpos_m),
+        )
+        self._step = 0
+        self._start_qpos = self.qpos
+        self._target_qpos[:, self.control_joint_indices] = target.to(self._target_qpos.dtype)
+        self._target_qpos[:, self.mimic_joint_indices] = (
+            self._target_qpos[:, self.mimic_control_joint_indices] * self._multiplier[None, :]
+            + self._offset[None, :]
+        )
+        self.set_drive_targets(self._target_qpos)
+
+
+@dataclass
+class BinaryGripperControllerConfig(PDJointPosMimicControllerConfig):
+    """Finger targets for the two gripper states."""
+
+    closed_qpos_m: float = -0.01
+    """Finger joint target when closing [m] (below the 0 limit so thin objects feel force)."""
+    open_qpos_m: float = 0.04
+    """Finger joint target when open [m] (the joint's upper limit)."""
+    normalize_action: bool = False
+    controller_cls = BinaryGripperController

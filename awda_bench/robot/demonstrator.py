@@ -1,0 +1,229 @@
+"""The demonstrator embodiment: a floating Panda hand, recoloured, with the agent's 4-D action space.
+
+The demo videos a one-shot policy watches must come from an embodiment that *looks different* from
+the agent (the references used a Sawyer demonstrator for a Panda agent). Only robot assets shipped in
+the ``mani-skill`` wheel may be used, so the demonstrator is ManiSkill's ``floating_panda_gripper``
+(``panda_v2_gripper.urdf``: a Panda hand on six virtual root joints, no arm), painted a dark blue so
+it is distinguishable from the white Panda arm at a glance, with gravity disabled on its links (it
+floats like a mocap hand).
+
+Its controller has the semantics of the agent's ``pd_ee_delta_pos_mink``::
+
+    action[:, 0:3] in [-1, 1] -> target_xyz += action * max_step_m   (world axes; no IK needed:
+                                  the root's three prismatic joints *are* the TCP translation)
+    target_xyz clipped to [workspace_low_m, workspace_high_m] (root-joint coordinates)
+    rotation joints held at their reset values (pointing down)
+    action[:, 3] > 0 closes the fingers, <= 0 opens them
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import sapien
+import torch
+from gymnasium import spaces
+from mani_skill.agents.base_agent import Keyframe
+from mani_skill.agents.controllers.pd_joint_pos import (
+    PDJointPosController,
+    PDJointPosControllerConfig,
+    PDJointPosMimicController,
+    PDJointPosMimicControllerConfig,
+)
+from mani_skill.agents.registration import register_agent
+from mani_skill.agents.robots.floating_panda_gripper import FloatingPandaGripper
+from mani_skill.utils import common
+from mani_skill.utils.structs.actor import Actor
+
+DEMONSTRATOR_UID = "awda_demonstrator"
+"""ManiSkill agent uid of the demonstrator."""
+
+DEMONSTRATOR_CONTROL_MODE = "pd_ee_delta_pos"
+"""Its only control mode: 4-D normalized TCP delta + binary gripper."""
+
+DEMONSTRATOR_COLOR = (0.12, 0.20, 0.55, 1.0)
+"""RGBA base colour painted over every visual part of the hand (the agent's Panda is white)."""
+
+TCP_BELOW_ROOT_M = 0.1034
+"""The TCP hangs this far below the root-joint origin when the hand points down [m]
+(``panda_hand_tcp_joint`` offset of ``panda_v2_gripper.urdf``)."""
+
+
+class FloatingDeltaPosController(PDJointPosController):
+    """TCP position deltas in [-1, 1]^3 on a floating hand's six root joints (rotation held)."""
+
+    config: FloatingDeltaPosControllerConfig
+
+    def _initialize_action_space(self) -> None:
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
+
+    def set_action(self, action: torch.Tensor) -> None:
+        commands = torch.clamp(action.to(self._target_qpos.dtype), -1.0, 1.0)
+        self._step = 0
+        self._start_qpos = self.qpos
+        low = torch.as_tensor(self.config.workspace_low_m, dtype=commands.dtype, device=self.device)
+        high = torch.as_tensor(self.config.workspace_high_m, dtype=commands.dtype, device=self.device)
+        target = self._target_qpos.clone()
+        target[:, :3] = torch.clamp(target[:, :3] + commands * self.config.max_step_m, low, high)
+        self._target_qpos = target
+        self.set_drive_targets(self._target_qpos)
+
+    def get_state(self) -> dict:
+        return {"target_qpos": self._target_qpos}
+
+    def set_state(self, state: dict) -> None:
+        self._target_qpos = state["target_qpos"]
+
+
+@dataclass
+class FloatingDeltaPosControllerConfig(PDJointPosControllerConfig):
+    """Root controller of the demonstrator (``lower``/``upper`` unused: the action is normalized).
+
+    ``joint_names`` must list the three prismatic root joints first, then the three rotations.
+    """
+
+    max_step_m: float = 0.02
+    """TCP displacement commanded by a unit action component in one control step [m] (the agent's)."""
+    workspace_low_m: tuple[float, float, float] = (-0.45, -0.55, 0.11)
+    """Lower corner of the box root-joint targets are clipped to [m] (z: TCP 0.7 cm above the table)."""
+    workspace_high_m: tuple[float, float, float] = (0.30, 0.55, 0.80)
+    """Upper corner of that box [m]."""
+    normalize_action: bool = False
+    controller_cls = FloatingDeltaPosController
+
+    def __post_init__(self) -> None:
+        if not self.max_step_m > 0:
+            raise ValueError(f"max_step_m must be > 0, got {self.max_step_m}")
+        if any(lo >= hi for lo, hi in zip(self.workspace_low_m, self.workspace_high_m, strict=True)):
+            raise ValueError(
+                f"workspace_low_m {self.workspace_low_m} must be below workspace_high_m {self.workspace_high_m}"
+            )
+
+
+class ClosePositiveGripperController(PDJointPosMimicController):
+    """One number per env: > 0 drives the fingers closed, <= 0 open (the agent's convention)."""
+
+    config: ClosePositiveGripperControllerConfig
+
+    def _initialize_action_space(self) -> None:
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
+
+    def set_action(self, action: torch.Tensor) -> None:
+        closed = action[:, :1] > 0
+        target = torch.where(
+            closed,
+            torch.full_like(action[:, :1], self.config.closed_qpos_m),
+            torch.full_like(action[:, :1], self.config.open_qpos_m),
+        ).to(self._target_qpos.dtype)
+        self._step = 0
+        self._start_qpos = self.qpos
+        self._target_qpos[:, self.control_joint_indices] = target
+        self._target_qpos[:, self.mimic_joint_indices] = (
+            self._target_qpos[:, self.mimic_control_joint_indices] * self._multiplier[None, :]
+            + self._offset[None, :]
+        )
+        self.set_drive_targets(self._target_qpos)
+
+
+@dataclass
+class ClosePositiveGripperControllerConfig(PDJointPosMimicControllerConfig):
+    """Finger targets for the two gripper states."""
+
+    closed_qpos_m: float = -0.01
+    """Finger joint target when closing [m] (below the 0 limit so thin objects feel force)."""
+    open_qpos_m: float = 0.04
+    """Finger joint target when open [m] (the joint's upper limit)."""
+    normalize_action: bool = False
+    controller_cls = ClosePositiveGripperController
+
+
+@register_agent()
+class AwdaDemonstrator(FloatingPandaGripper):
+    """Floating Panda hand, dark blue, 4-D action space (see the module docstring)."""
+
+    uid = DEMONSTRATOR_UID
+    keyframes = dict(
+        rest=Keyframe(
+            # root x, y, z [m]; root rotations x, y, z [rad] (y = pi: pointing down); fingers [m]
+            qpos=np.array([-0.10, 0.0, 0.35 + TCP_BELOW_ROOT_M, 0.0, np.pi, 0.0, 0.04, 0.04]),
+            pose=sapien.Pose(),
+        )
+    )
+    root_stiffness = 2e4
+    """Root joint drive stiffness [N/m, N m/rad]: stiff enough to carry a 0.2 kg carton without lag."""
+    root_damping = 1e3
+    """Root joint drive damping."""
+    root_force_limit = 500.0
+    """Root joint force limit [N]."""
+
+    @property
+    def _controller_configs(self) -> dict:
+        root = FloatingDeltaPosControllerConfig(
+            joint_names=self.root_joint_names,
+            lower=None,
+            upper=None,
+            stiffness=self.root_stiffness,
+            damping=self.root_damping,
+            force_limit=self.root_force_limit,
+            use_target=True,
+        )
+        gripper = ClosePositiveGripperControllerConfig(
+            joint_names=self.gripper_joint_names,
+            lower=-0.01,
+            upper=0.04,
+            stiffness=self.gripper_stiffness,
+            damping=self.gripper_damping,
+            force_limit=self.gripper_force_limit,
+        )
+        return {DEMONSTRATOR_CONTROL_MODE: dict(arm=root, gripper=gripper)}
+
+    def _after_init(self) -> None:
+        super()._after_init()
+        for link in self.robot.get_links():
+            link.disable_gravity = True
+        self._paint(DEMONSTRATOR_COLOR)
+
+    def _paint(self, rgba: tuple[float, float, float, float]) -> None:
+        """Set the base colour of every visual part of every link (all parallel scenes)."""
+        for link in self.robot.get_links():
+            for obj in link._objs:
+                body = obj.entity.find_component_by_type(sapien.render.RenderBodyComponent)
+                if body is None:
+                    continue
+                for shape in body.render_shapes:
+                    for part in shape.parts:
+                        part.material.set_base_color(list(rgba))
+
+    @property
+    def tcp_pos(self) -> torch.Tensor:
+        """(n, 3) TCP position in the world [m]."""
+        return self.tcp.pose.p
+
+    @property
+    def tcp_pose(self):
+        return self.tcp.pose
+
+    @property
+    def gripper_opening_m(self) -> torch.Tensor:
+        """(n,) distance between the two fingers [m] (sum of the two finger joints)."""
+        qpos = self.robot.get_qpos()
+        return qpos[:, -2] + qpos[:, -1]
+
+    def is_grasping(self, object: Actor, min_force: float = 0.5, max_angle: float = 85) -> torch.Tensor:
+        """(n,) both fingers push on ``object`` with >= ``min_force`` [N] from the inside (Panda's test)."""
+        l_contact_forces = self.scene.get_pairwise_contact_forces(self.finger1_link, object)
+        r_contact_forces = self.scene.get_pairwise_contact_forces(self.finger2_link, object)
+        lforce = torch.linalg.norm(l_contact_forces, axis=1)
+        rforce = torch.linalg.norm(r_contact_forces, axis=1)
+        ldirection = self.finger1_link.pose.to_transformation_matrix()[..., :3, 1]
+        rdirection = -self.finger2_link.pose.to_transformation_matrix()[..., :3, 1]
+        langle = common.compute_angle_between(ldirection, l_contact_forces)
+        rangle = common.compute_angle_between(rdirection, r_contact_forces)
+        lflag = torch.logical_and(lforce >= min_force, torch.rad2deg(langle) <= max_angle)
+        rflag = torch.logical_and(rforce >= min_force, torch.rad2deg(rangle) <= max_angle)
+        return torch.logical_and(lflag, rflag)
+
+    def is_static(self, threshold: float = 0.2) -> torch.Tensor:
+        qvel = self.robot.get_qvel()[..., :-2]
+        return torch.max(torch.abs(qvel), 1)[0] <= threshold
