@@ -1,0 +1,44 @@
+"""What every primitive sees (:class:`RobotState`) and the one method it implements.
+
+A primitive is a small state machine over control steps::
+
+    while (a := primitive.step(state)) is not None:
+        state = env.step(a)          # a: (4,) float in [-1, 1] -- dx, dy, dz, grip (> 0 closes)
+
+``step`` returns ``None`` once the primitive has finished *without* consuming a control step, so the
+executor can start the next primitive in the same step.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+GRIP_OPEN: float = -1.0
+"""Gripper component of an action that opens (any value <= 0 opens)."""
+GRIP_CLOSE: float = 1.0
+"""Gripper component of an action that closes (any value > 0 closes)."""
+
+
+@dataclass(frozen=True)
+class RobotState:
+    """The proprioceptive state of one env at one control step."""
+
+    tcp_pos: np.ndarray
+    """(3,) tool centre point in the world frame [m]."""
+    gripper_opening_m: float
+    """Distance between the finger pads [m]."""
+
+
+class Primitive(Protocol):
+    """One motor primitive acting through the 4-D action space."""
+
+    def step(self, state: RobotState) -> np.ndarray | None:
+        """Next action ``(4,)`` in [-1, 1], or ``None`` when finished (no step consumed)."""
+
+
+def hold_action(grip: float) -> np.ndarray:
+    """Zero motion with the given gripper command, shape ``(4,)``."""
+    return np.array([0.0, 0.0, 0.0, grip], dtype=np.float64)

@@ -1,0 +1,168 @@
+"""Parameters of the motor primitives, the localizer and the waypoint executor.
+
+All are frozen dataclasses whose fields carry their unit in the name or docstring; each validates
+itself in ``__post_init__`` and raises :class:`~awda_bench.errors.UsageError` naming the field and
+the value. Defaults are the reference values of supplementary S1 / SPEC §4 where those exist,
+otherwise chosen for our controller (20 Hz, at most 0.02 m of TCP motion per control step).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+from awda_bench.errors import UsageError
+
+
+def _require_positive(obj: object, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        if not value > 0:
+            raise UsageError(f"{type(obj).__name__}.{name} must be > 0, got {value!r}")
+
+
+def _require_non_negative(obj: object, *names: str) -> None:
+    for name in names:
+        value = getattr(obj, name)
+        if not value >= 0:
+            raise UsageError(f"{type(obj).__name__}.{name} must be >= 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class FreeSpaceConfig:
+    """Straight-line motion of the TCP towards a destination (also used by carry).
+
+    Per control step the commanded displacement is ``d = p* - p`` scaled to the controller's step:
+    ``a_xyz = d / max_step_m``, divided by ``max(1, max_i |a_i|)`` so every component lies in
+    [-1, 1] *and the direction is kept* (a straight line, not a per-axis clip).
+    """
+
+    max_step_m: float = 0.02
+    """TCP displacement [m] the controller makes for a unit action component (lead's controller:
+    0.02 m per control step at 20 Hz)."""
+    reach_tol_m: float = 0.02
+    """The destination counts as reached within this Euclidean distance [m] (reference: 2 cm)."""
+    step_budget: int = 60
+    """Control steps after which the motion ends even if not reached (60 steps = 3 s, enough for
+    1.2 m at full speed, more than the workspace diagonal)."""
+
+    def __post_init__(self) -> None:
+        _require_positive(self, "max_step_m", "reach_tol_m", "step_budget")
+
+
+@dataclass(frozen=True)
+class DropConfig:
+    """Open the gripper in place."""
+
+    open_steps: int = 6
+    """Control steps the open command is held with zero motion (0.3 s at 20 Hz; the Panda fingers
+    open from a 3.5 cm grip to fully open in about that time, measured on ``panda_awda``)."""
+
+    def __post_init__(self) -> None:
+        _require_positive(self, "open_steps")
+
+
+@dataclass(frozen=True)
+class LocalizationConfig:
+    """Object localization from one wrist depth image (SPEC §4, six steps)."""
+
+    background_m: float = 1.0
+    """Step 1: depths beyond this [m] (and 0 = no return) are background."""
+    above_floor_m: float = 0.01
+    """Step 3: a pixel belongs to an object if its depth is at least this much [m] nearer than the
+    floor depth (the median of step 2)."""
+    min_area_px: int = 50
+    """Step 4: smallest connected component kept as an object proposal [px] (reference: 50)."""
+    max_area_px: int = 5000
+    """Step 4: largest connected component kept [px] (reference: 5000)."""
+    min_depth_m: float = 0.0
+    """Pixels nearer than this [m] are the gripper's own fingers and masked out before step 2
+    (0 disables; the sim adapter sets it from the camera mount)."""
+    connectivity: int = 8
+    """Pixel connectivity of the connected components (4 or 8)."""
+
+    def __post_init__(self) -> None:
+        _require_positive(self, "background_m", "above_floor_m", "min_area_px", "max_area_px")
+        _require_non_negative(self, "min_depth_m")
+        if self.max_area_px < self.min_area_px:
+            raise UsageError(
+                f"LocalizationConfig.max_area_px ({self.max_area_px}) must be >= "
+                f"min_area_px ({self.min_area_px})"
+            )
+        if self.connectivity not in (4, 8):
+            raise UsageError(
+                f"LocalizationConfig.connectivity must be 4 or 8, got {self.connectivity!r}"
+            )
+
+
+@dataclass(frozen=True)
+class GraspConfig:
+    """The grasp primitive: localize, hover above, descend, close, lift (S1 steps 1-5)."""
+
+    hover_height_m: float = 0.15
+    """Step 2: the TCP goes to this height [m] above the localized object top (reference: 15 cm)."""
+    hover_tol_m: float = 0.01
+    """Step 2 ends when the TCP is within this distance [m] of the hover point."""
+    hover_step_budget: int = 60
+    """Control steps allowed for step 2."""
+    descent_offset_m: float = 0.03
+    """Step 3: the TCP descends to the localized z (the object's visible top surface) minus this
+    offset [m], so the finger pads close this far below the top (reference: 3 cm for the Panda
+    gripper; a parameter per end-effector)."""
+    min_floor_clearance_m: float = 0.015
+    """Step 3: the descent target is never lower than this [m] above the localized floor (keeps
+    the fingertips off the support for flat objects)."""
+    descend_tol_m: float = 0.01
+    """Step 3 ends within this distance [m] of the descent target."""
+    descend_step_budget: int = 30
+    """Control steps allowed for step 3."""
+    close_steps: int = 8
+    """Step 4: control steps the close command is held in place (0.4 s at 20 Hz)."""
+    lift_m: float = 0.15
+    """Step 5: lift this far [m] straight up with the gripper closed (reference: 15 cm)."""
+    lift_tol_m: float = 0.02
+    """Step 5 ends within this distance [m] of the lift target."""
+    lift_step_budget: int = 20
+    """Control steps allowed for step 5."""
+
+    def __post_init__(self) -> None:
+        _require_positive(
+            self,
+            "hover_height_m",
+            "hover_tol_m",
+            "hover_step_budget",
+            "descend_tol_m",
+            "descend_step_budget",
+            "close_steps",
+            "lift_m",
+            "lift_tol_m",
+            "lift_step_budget",
+        )
+        _require_non_negative(self, "descent_offset_m", "min_floor_clearance_m")
+
+
+@dataclass(frozen=True)
+class ExecutorConfig:
+    """Reference semantics of attributed-waypoint execution (SPEC §4)."""
+
+    pregrasp_raise_m: float = 0.15
+    """The waypoint before the first grasp-attributed waypoint is raised this much [m]."""
+    motion: FreeSpaceConfig = FreeSpaceConfig()
+    """Free-space / carry motion between waypoints (2 cm reach tolerance, step budget)."""
+    grasp: GraspConfig = GraspConfig()
+    """The grasp primitive run at the first grasp-attributed waypoint."""
+    drop: DropConfig = DropConfig()
+    """The drop run at the first free waypoint after carrying."""
+    max_grasps: int = 1
+    """Grasp attempts per episode (reference: one)."""
+
+    def __post_init__(self) -> None:
+        _require_non_negative(self, "pregrasp_raise_m", "max_grasps")
+
+
+def describe(config: object) -> dict[str, object]:
+    """Flat ``{field: value}`` of a config dataclass (nested configs as dicts), for records."""
+    out: dict[str, object] = {}
+    for f in fields(config):  # type: ignore[arg-type]
+        value = getattr(config, f.name)
+        out[f.name] = describe(value) if hasattr(value, "__dataclass_fields__") else value
+    return out

@@ -1,0 +1,58 @@
+"""Free-space motion: a straight line from the TCP to a destination, one control step at a time."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from awda_bench.primitives.base import GRIP_OPEN, RobotState
+from awda_bench.primitives.config import FreeSpaceConfig
+
+
+def straight_line_action(
+    tcp_pos: np.ndarray, target: np.ndarray, max_step_m: float, grip: float
+) -> np.ndarray:
+    """The action moving the TCP straight towards ``target``.
+
+    With ``d = target - tcp_pos`` [m] and ``s = max_step_m`` (displacement per unit action)::
+
+        a_xyz = (d / s) / max(1, ||d / s||_inf)
+
+    so the commanded displacement is exactly ``d`` when it fits in one step, otherwise the largest
+    step along ``d`` whose components all lie in [-1, 1] (the direction is preserved).
+    """
+    a = (np.asarray(target, dtype=np.float64) - np.asarray(tcp_pos, dtype=np.float64)) / max_step_m
+    a = a / max(1.0, float(np.max(np.abs(a))))
+    return np.array([a[0], a[1], a[2], grip], dtype=np.float64)
+
+
+class FreeSpace:
+    """Move the TCP to ``target`` in a straight line with a fixed gripper command.
+
+    Finishes when ``||p - target|| < reach_tol_m`` or after ``step_budget`` actions.
+    """
+
+    def __init__(
+        self,
+        target: np.ndarray,
+        config: FreeSpaceConfig = FreeSpaceConfig(),
+        grip: float = GRIP_OPEN,
+    ) -> None:
+        self.target = np.asarray(target, dtype=np.float64).reshape(3)
+        self.config = config
+        self.grip = float(grip)
+        self.steps = 0
+        """Actions issued so far."""
+        self.reached = False
+        """True if the motion ended within the tolerance (False if the budget ran out)."""
+
+    def step(self, state: RobotState) -> np.ndarray | None:
+        if np.linalg.norm(self.target - state.tcp_pos) < self.config.reach_tol_m:
+            self.reached = True
+            return None
+        if self.steps >= self.config.step_budget:
+            return None
+        self.steps += 1
+        return straight_line_action(state.tcp_pos, self.target, self.config.max_step_m, self.grip)
+
+
+__all__ = ["FreeSpace", "straight_line_action"]

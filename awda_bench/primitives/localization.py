@@ -1,0 +1,120 @@
+"""Object localization from one wrist depth image (SPEC §4; supplementary S1, six steps).
+
+Pure numpy + OpenCV on one image, so it is testable on synthetic depth maps::
+
+    depth_m (H, W) [m], 0 = no return      K (3, 3) intrinsics      cam2world (4, 4), OpenCV axes
+                                                                     (x right, y down, z forward)
+
+1. background: ``valid = 0 < D <= background_m`` (and ``D >= min_depth_m``: the gripper's fingers);
+2. floor depth ``D_f = median(D[valid])``;
+3. object mask ``M = valid & (D <= D_f - above_floor_m)`` (pixels >= 1 cm above the floor plane,
+   for a camera looking straight down; the depth difference is the height);
+4. connected components of ``M`` (OpenCV), kept if ``min_area_px <= area <= max_area_px``;
+5. the component whose centroid ``(u_c, v_c)`` is nearest the image centre ``((W-1)/2, (H-1)/2)``;
+6. back-projection of the centroid's depth ``z``::
+
+       p_cam   = z * K^-1 [u_c, v_c, 1]^T
+       p_world = cam2world[:3, :3] p_cam + cam2world[:3, 3]
+
+   ``z`` is the depth at the rounded centroid pixel when that pixel belongs to the component, else
+   the component's median depth (a concave or ring-shaped blob has its centroid off the object).
+
+The floor point is the back-projection of the image centre at depth ``D_f``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from awda_bench.errors import UsageError
+from awda_bench.primitives.config import LocalizationConfig
+
+
+@dataclass(frozen=True)
+class Localization:
+    """Result of :func:`localize_object` for one image."""
+
+    position_world: np.ndarray
+    """(3,) estimated object position [m]: the visible top surface under the centroid."""
+    floor_world: np.ndarray
+    """(3,) a point of the floor (support) plane [m], under the image centre."""
+    pixel: tuple[float, float]
+    """Centroid ``(u, v)`` [px] of the chosen component."""
+    area_px: int
+    """Pixel count of the chosen component."""
+    n_proposals: int
+    """Components that passed the area bounds (the chosen one included)."""
+    floor_depth_m: float
+    """Median depth of step 2 [m]."""
+
+
+def back_project(u: float, v: float, z: float, K: np.ndarray, cam2world: np.ndarray) -> np.ndarray:
+    """World point [m] of pixel ``(u, v)`` at depth ``z`` [m]: ``T (z K^-1 [u, v, 1])``."""
+    x = (u - K[0, 2]) * z / K[0, 0]
+    y = (v - K[1, 2]) * z / K[1, 1]
+    p = np.array([x, y, z, 1.0])
+    return (np.asarray(cam2world, dtype=np.float64) @ p)[:3]
+
+
+def localize_object(
+    depth_m: np.ndarray,
+    K: np.ndarray,
+    cam2world: np.ndarray,
+    config: LocalizationConfig = LocalizationConfig(),
+) -> Localization | None:
+    """Localize the object nearest the image centre, or ``None`` if there is no proposal.
+
+    Args:
+        depth_m: (H, W) depth along the optical axis [m]; 0 where the camera saw nothing.
+        K: (3, 3) pinhole intrinsics [px].
+        cam2world: (4, 4) camera pose, OpenCV axes.
+        config: thresholds of steps 1-4.
+    """
+    depth = np.asarray(depth_m, dtype=np.float32)
+    if depth.ndim != 2:
+        raise UsageError(f"depth_m must be (H, W), got shape {depth.shape}")
+    if np.shape(K) != (3, 3) or np.shape(cam2world) != (4, 4):
+        raise UsageError(
+            f"K must be (3, 3) and cam2world (4, 4), got {np.shape(K)}, {np.shape(cam2world)}"
+        )
+    # 1. background (and no-return pixels, and the fingers right in front of the lens)
+    valid = (depth > 0) & (depth <= config.background_m) & (depth >= config.min_depth_m)
+    if not valid.any():
+        return None
+    # 2. floor depth
+    floor_depth = float(np.median(depth[valid]))
+    # 3. pixels at least above_floor_m above the floor
+    mask = valid & (depth <= floor_depth - config.above_floor_m)
+    if not mask.any():
+        return None
+    # 4. connected components -> proposals within the area bounds
+    n, labels, stats, centroids = cv2.connectedComponentsWithStats(
+        mask.astype(np.uint8), connectivity=config.connectivity
+    )
+    areas = stats[1:, cv2.CC_STAT_AREA]
+    keep = np.flatnonzero((areas >= config.min_area_px) & (areas <= config.max_area_px)) + 1
+    if keep.size == 0:
+        return None
+    # 5. centroid nearest the image centre
+    H, W = depth.shape
+    centre = np.array([(W - 1) / 2.0, (H - 1) / 2.0])
+    dist = np.linalg.norm(centroids[keep] - centre, axis=1)
+    label = int(keep[int(np.argmin(dist))])
+    u, v = (float(c) for c in centroids[label])
+    # 6. back-project the centroid's depth
+    ui, vi = int(round(u)), int(round(v))
+    if labels[vi, ui] == label:
+        z = float(depth[vi, ui])
+    else:
+        z = float(np.median(depth[labels == label]))
+    return Localization(
+        position_world=back_project(u, v, z, K, cam2world),
+        floor_world=back_project(centre[0], centre[1], floor_depth, K, cam2world),
+        pixel=(u, v),
+        area_px=int(stats[label, cv2.CC_STAT_AREA]),
+        n_proposals=int(keep.size),
+        floor_depth_m=floor_depth,
+    )

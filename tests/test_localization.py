@@ -1,0 +1,141 @@
+"""Localization on synthetic depth images with known answers (SPEC §4, six steps)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from awda_bench.errors import UsageError
+from awda_bench.primitives.config import LocalizationConfig
+from awda_bench.primitives.kinematic_fake import Box, TopDownDepthCamera
+from awda_bench.primitives.localization import back_project, localize_object
+
+CAM = TopDownDepthCamera(width=160, height=120)
+
+
+def _box(x: float, y: float, sx: float = 0.04, sy: float = 0.04, h: float = 0.08) -> Box:
+    return Box(center_xy=np.array([x, y]), size=np.array([sx, sy, h]))
+
+
+def _localize(cam_pos, boxes, config=LocalizationConfig()):
+    cam_pos = np.asarray(cam_pos, dtype=float)
+    depth = CAM.render(cam_pos, boxes)
+    return localize_object(depth, CAM.K, CAM.cam2world(cam_pos), config)
+
+
+def test_single_object_below_camera_is_found_at_its_top() -> None:
+    loc = _localize([0.3, -0.1, 0.35], [_box(0.31, -0.11, h=0.1)])
+    assert loc is not None
+    assert np.linalg.norm(loc.position_world[:2] - [0.31, -0.11]) < 0.005
+    assert loc.position_world[2] == pytest.approx(0.1, abs=1e-4)
+    assert loc.floor_world[2] == pytest.approx(0.0, abs=1e-4)
+    assert loc.n_proposals == 1
+
+
+def test_empty_floor_gives_none() -> None:
+    assert _localize([0.0, 0.0, 0.3], []) is None
+
+
+def test_everything_beyond_background_gives_none() -> None:
+    # camera 1.5 m above the floor: all depths are background (> 1 m)
+    assert _localize([0.0, 0.0, 1.5], [_box(0.0, 0.0, h=0.3)]) is None
+
+
+def test_object_shorter_than_threshold_is_floor() -> None:
+    assert _localize([0.0, 0.0, 0.3], [_box(0.0, 0.0, h=0.005)]) is None
+
+
+def test_two_objects_the_one_nearest_the_image_centre_wins() -> None:
+    boxes = [_box(0.05, 0.02, h=0.12), _box(-0.08, -0.06, h=0.05)]
+    loc = _localize([0.04, 0.03, 0.4], boxes)
+    assert loc is not None and loc.n_proposals == 2
+    assert np.linalg.norm(loc.position_world[:2] - [0.05, 0.02]) < 0.005
+    loc = _localize([-0.07, -0.05, 0.4], boxes)
+    assert loc is not None
+    assert np.linalg.norm(loc.position_world[:2] - [-0.08, -0.06]) < 0.005
+    assert loc.position_world[2] == pytest.approx(0.05, abs=1e-4)
+
+
+def test_object_cut_by_the_image_border_is_localized_on_its_visible_part() -> None:
+    # camera at height 0.3 sees |x| <= 0.3 - h on the box top plane; the box straddles x = 0.22
+    h = 0.08
+    edge = 0.3 - h
+    loc = _localize([0.0, 0.0, 0.3], [_box(edge, 0.0, sx=0.06, sy=0.06, h=h)])
+    assert loc is not None
+    # the centroid of the visible half lies inside the image, left of the true centre
+    assert edge - 0.03 < loc.position_world[0] < edge
+    assert loc.position_world[1] == pytest.approx(0.0, abs=0.005)
+    u, _ = loc.pixel
+    assert u < CAM.width - 1
+
+
+def test_area_bounds_reject_specks_and_giant_components() -> None:
+    cfg = LocalizationConfig(min_area_px=50, max_area_px=5000)
+    # a 1 cm speck at 0.4 m depth covers ~ (0.01 * 80 / 0.4)^2 = 4 px
+    assert _localize([0.0, 0.0, 0.45], [_box(0.0, 0.0, sx=0.01, sy=0.01, h=0.05)], cfg) is None
+    # a 0.3 m slab right under the camera covers far more than 5000 px ...
+    slab = _box(0.0, 0.0, sx=0.3, sy=0.3, h=0.05)
+    assert _localize([0.0, 0.0, 0.3], [slab], cfg) is None
+    # ... unless the upper bound allows it
+    assert _localize([0.0, 0.0, 0.3], [slab], LocalizationConfig(max_area_px=10**6)) is not None
+
+
+def test_fingers_in_front_of_the_lens_are_masked() -> None:
+    cam_pos = np.array([0.0, 0.0, 0.3])
+    depth = CAM.render(cam_pos, [_box(0.1, 0.05)])
+    depth[:, 60:100] = 0.02  # a finger band through the image centre, 2 cm from the lens
+    unmasked = localize_object(
+        depth, CAM.K, CAM.cam2world(cam_pos), LocalizationConfig(max_area_px=10**6)
+    )
+    assert unmasked is not None and unmasked.position_world[2] > 0.25  # the finger wins unmasked
+    loc = localize_object(
+        depth, CAM.K, CAM.cam2world(cam_pos), LocalizationConfig(min_depth_m=0.05)
+    )
+    assert loc is not None
+    assert np.linalg.norm(loc.position_world[:2] - [0.1, 0.05]) < 0.005
+    depth[:, :] = 0.02
+    assert (
+        localize_object(depth, CAM.K, CAM.cam2world(cam_pos), LocalizationConfig(min_depth_m=0.05))
+        is None
+    )
+
+
+def test_ring_object_uses_component_median_depth() -> None:
+    cam_pos = np.array([0.0, 0.0, 0.4])
+    depth = CAM.render(cam_pos, [])
+    yy, xx = np.mgrid[: CAM.height, : CAM.width]
+    r = np.hypot(xx - 80, yy - 60)
+    ring = (r > 10) & (r < 16)
+    depth[ring] = 0.3  # 10 cm high ring; its centroid (the hole) sees the floor
+    loc = localize_object(depth, CAM.K, CAM.cam2world(cam_pos))
+    assert loc is not None
+    assert loc.position_world[2] == pytest.approx(0.1, abs=1e-4)
+
+
+def test_tilted_camera_back_projection_matches_geometry() -> None:
+    # a camera rotated 30 degrees about x: back_project must invert the projection
+    a = np.deg2rad(30)
+    R = np.diag([1.0, -1.0, -1.0]) @ np.array(
+        [[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]]
+    )
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = [0.1, 0.2, 0.5]
+    p_world = np.array([0.15, 0.1, 0.02])
+    p_cam = R.T @ (p_world - T[:3, 3])
+    uv = CAM.K @ (p_cam / p_cam[2])
+    assert np.allclose(back_project(uv[0], uv[1], p_cam[2], CAM.K, T), p_world)
+
+
+def test_bad_shapes_raise_usage_error() -> None:
+    with pytest.raises(UsageError):
+        localize_object(np.zeros((2, 3, 4)), CAM.K, np.eye(4))
+    with pytest.raises(UsageError):
+        localize_object(np.zeros((4, 4)), np.eye(4), np.eye(4))
+
+
+def test_config_validates_itself() -> None:
+    with pytest.raises(UsageError, match="max_area_px"):
+        LocalizationConfig(min_area_px=100, max_area_px=10)
+    with pytest.raises(UsageError, match="connectivity"):
+        LocalizationConfig(connectivity=6)
