@@ -139,3 +139,41 @@ def test_config_validates_itself() -> None:
         LocalizationConfig(min_area_px=100, max_area_px=10)
     with pytest.raises(UsageError, match="connectivity"):
         LocalizationConfig(connectivity=6)
+
+
+def _tilted_pose(position, tilt_deg: float) -> np.ndarray:
+    a = np.deg2rad(tilt_deg)
+    R = np.diag([1.0, -1.0, -1.0]) @ np.array(
+        [[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]]
+    )
+    T = np.eye(4)
+    T[:3, :3] = R
+    T[:3, 3] = position
+    return T
+
+
+def test_depth_and_world_height_references_agree_for_a_downward_camera() -> None:
+    boxes = [_box(0.02, 0.01, h=0.1), _box(-0.12, 0.1, h=0.05)]
+    for ref in ("depth", "world"):
+        loc = _localize([0.0, 0.0, 0.35], boxes, LocalizationConfig(height_reference=ref))
+        assert loc is not None and loc.n_proposals == 2
+        assert np.linalg.norm(loc.position_world - [0.02, 0.01, 0.1]) < 0.005
+        assert loc.floor_world[2] == pytest.approx(0.0, abs=1e-3)
+
+
+def test_world_heights_handle_a_tilted_camera_where_literal_depths_do_not() -> None:
+    # a camera tilted 15 degrees: floor depths vary across the image, so "depth" mode sees the
+    # near half of the floor as an object; "world" mode finds the box and the floor height
+    T = _tilted_pose([0.0, 0.0, 0.35], 15.0)
+    centre_ray = T[:3, :3] @ np.array([0.0, 0.0, 1.0])
+    hit = T[:3, 3] + centre_ray * (0.25 / -centre_ray[2])  # centre ray at height 0.1
+    boxes = [_box(hit[0], hit[1], sx=0.03, sy=0.03, h=0.1)]
+    depth = CAM.render_pose(T, boxes)
+    world = localize_object(depth, CAM.K, T, LocalizationConfig(height_reference="world"))
+    assert world is not None and world.n_proposals == 1
+    assert np.linalg.norm(world.position_world - [hit[0], hit[1], 0.1]) < 0.005
+    assert world.floor_world[2] == pytest.approx(0.0, abs=1e-3)
+    literal = localize_object(
+        depth, CAM.K, T, LocalizationConfig(height_reference="depth", max_area_px=10**6)
+    )
+    assert literal is not None and literal.n_proposals >= 2  # the near floor became a proposal

@@ -79,6 +79,13 @@ class LocalizationConfig:
     (0 disables; the sim adapter sets it from the camera mount)."""
     connectivity: int = 8
     """Pixel connectivity of the connected components (4 or 8)."""
+    height_reference: str = "world"
+    """How steps 2-3 measure "above the floor": ``"depth"`` compares camera depths literally
+    (floor depth = median depth; exact only for a camera looking straight down), ``"world"``
+    back-projects every valid pixel and compares world heights (floor height = median z). Our
+    wrist camera is tilted ~11 degrees (it looks at the point 15 cm below the TCP), which makes
+    floor depths vary by +-20 % across the image, so ``"world"`` is the default; for a downward
+    camera the two agree."""
 
     def __post_init__(self) -> None:
         _require_positive(self, "background_m", "above_floor_m", "min_area_px", "max_area_px")
@@ -87,6 +94,11 @@ class LocalizationConfig:
             raise UsageError(
                 f"LocalizationConfig.max_area_px ({self.max_area_px}) must be >= "
                 f"min_area_px ({self.min_area_px})"
+            )
+        if self.height_reference not in ("depth", "world"):
+            raise UsageError(
+                "LocalizationConfig.height_reference must be 'depth' or 'world', "
+                f"got {self.height_reference!r}"
             )
         if self.connectivity not in (4, 8):
             raise UsageError(

@@ -59,22 +59,33 @@ class TopDownDepthCamera:
         return T
 
     def render(self, position: np.ndarray, boxes: list[Box], far_m: float = 10.0) -> np.ndarray:
-        """(H, W) depth [m] seen from ``position``; 0 beyond ``far_m``."""
+        """(H, W) depth [m] looking straight down from ``position``; 0 beyond ``far_m``."""
+        return self.render_pose(self.cam2world(np.asarray(position, float)), boxes, far_m)
+
+    def render_pose(
+        self, cam2world: np.ndarray, boxes: list[Box], far_m: float = 10.0
+    ) -> np.ndarray:
+        """(H, W) depth [m] (along the optical axis) from any camera pose (OpenCV axes).
+
+        Ray of pixel ``(u, v)``: ``o + t R [(u - c_x)/f, (v - c_y)/f, 1]``; ``t`` is the depth.
+        The floor (z = 0) and the box tops (horizontal rectangles) are intersected; no box sides.
+        """
         K = self.K
-        u = np.arange(self.width)
-        v = np.arange(self.height)
-        uu, vv = np.meshgrid(u, v)
-        rx = (uu - K[0, 2]) / K[0, 0]  # world dx per metre of depth
-        ry = -(vv - K[1, 2]) / K[1, 1]  # world dy per metre of depth
-        depth = np.full((self.height, self.width), position[2], dtype=np.float64)  # floor z = 0
-        for box in sorted(boxes, key=lambda b: b.top_z):
-            z = position[2] - box.top_z
-            if z <= 0:
-                continue
-            xy = np.stack([position[0] + rx * z, position[1] + ry * z], axis=-1)
-            hit = box.contains_xy(xy)
-            depth[hit] = np.minimum(depth[hit], z)
-        depth[depth > far_m] = 0.0
+        uu, vv = np.meshgrid(np.arange(self.width), np.arange(self.height))
+        rays = np.stack(
+            [(uu - K[0, 2]) / K[0, 0], (vv - K[1, 2]) / K[1, 1], np.ones_like(uu, float)]
+        )
+        R, o = cam2world[:3, :3], cam2world[:3, 3]
+        d = np.einsum("ij,jhw->ihw", R, rays)  # world direction per unit depth
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_floor = np.where(d[2] < 0, -o[2] / d[2], np.inf)
+            depth = t_floor.copy()
+            for box in boxes:
+                t = np.where(d[2] < 0, (box.top_z - o[2]) / d[2], np.inf)
+                xy = np.stack([o[0] + t * d[0], o[1] + t * d[1]], axis=-1)
+                hit = (t > 0) & box.contains_xy(xy) & (t < depth)
+                depth[hit] = t[hit]
+        depth[~np.isfinite(depth) | (depth > far_m)] = 0.0
         return depth.astype(np.float32)
 
 

@@ -6,9 +6,11 @@ Pure numpy + OpenCV on one image, so it is testable on synthetic depth maps::
                                                                      (x right, y down, z forward)
 
 1. background: ``valid = 0 < D <= background_m`` (and ``D >= min_depth_m``: the gripper's fingers);
-2. floor depth ``D_f = median(D[valid])``;
-3. object mask ``M = valid & (D <= D_f - above_floor_m)`` (pixels >= 1 cm above the floor plane,
-   for a camera looking straight down; the depth difference is the height);
+2. floor: ``height_reference="depth"`` (literal): floor depth ``D_f = median(D[valid])``;
+   ``"world"`` (default): back-project every valid pixel, floor height ``z_f = median(z_world)``;
+3. object mask: ``"depth"``: ``M = valid & (D <= D_f - above_floor_m)`` (the depth difference is
+   the height only for a camera looking straight down); ``"world"``:
+   ``M = valid & (z_world >= z_f + above_floor_m)`` (correct for any camera tilt);
 4. connected components of ``M`` (OpenCV), kept if ``min_area_px <= area <= max_area_px``;
 5. the component whose centroid ``(u_c, v_c)`` is nearest the image centre ``((W-1)/2, (H-1)/2)``;
 6. back-projection of the centroid's depth ``z``::
@@ -19,7 +21,8 @@ Pure numpy + OpenCV on one image, so it is testable on synthetic depth maps::
    ``z`` is the depth at the rounded centroid pixel when that pixel belongs to the component, else
    the component's median depth (a concave or ring-shaped blob has its centroid off the object).
 
-The floor point is the back-projection of the image centre at depth ``D_f``.
+The floor point is the back-projection of the image centre at depth ``D_f`` ("depth"), or the
+object's x, y at height ``z_f`` ("world").
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ class Localization:
     n_proposals: int
     """Components that passed the area bounds (the chosen one included)."""
     floor_depth_m: float
-    """Median depth of step 2 [m]."""
+    """Median depth of the valid pixels [m] (the floor distance of step 2 in ``"depth"`` mode)."""
 
 
 def back_project(u: float, v: float, z: float, K: np.ndarray, cam2world: np.ndarray) -> np.ndarray:
@@ -57,6 +60,19 @@ def back_project(u: float, v: float, z: float, K: np.ndarray, cam2world: np.ndar
     y = (v - K[1, 2]) * z / K[1, 1]
     p = np.array([x, y, z, 1.0])
     return (np.asarray(cam2world, dtype=np.float64) @ p)[:3]
+
+
+def pixel_heights(depth_m: np.ndarray, K: np.ndarray, cam2world: np.ndarray) -> np.ndarray:
+    """(H, W) world z [m] of every pixel back-projected at its depth (meaningless where depth = 0).
+
+    ``z_world(u, v) = r_3 . (D (u - c_x) / f_x, D (v - c_y) / f_y, D) + t_3`` with ``r_3`` the
+    third row of the camera rotation and ``t_3`` the camera height.
+    """
+    H, W = depth_m.shape
+    r = np.asarray(cam2world, dtype=np.float64)[2]
+    a = r[0] / K[0, 0] * (np.arange(W) - K[0, 2])  # (W,)
+    b = r[1] / K[1, 1] * (np.arange(H) - K[1, 2])  # (H,)
+    return depth_m * (a[None, :] + b[:, None] + r[2]) + r[3]
 
 
 def localize_object(
@@ -84,10 +100,15 @@ def localize_object(
     valid = (depth > 0) & (depth <= config.background_m) & (depth >= config.min_depth_m)
     if not valid.any():
         return None
-    # 2. floor depth
+    # 2.-3. floor and the pixels at least above_floor_m above it
     floor_depth = float(np.median(depth[valid]))
-    # 3. pixels at least above_floor_m above the floor
-    mask = valid & (depth <= floor_depth - config.above_floor_m)
+    floor_z: float | None = None
+    if config.height_reference == "depth":
+        mask = valid & (depth <= floor_depth - config.above_floor_m)
+    else:
+        z_world = pixel_heights(depth, K, cam2world)
+        floor_z = float(np.median(z_world[valid]))
+        mask = valid & (z_world >= floor_z + config.above_floor_m)
     if not mask.any():
         return None
     # 4. connected components -> proposals within the area bounds
@@ -110,9 +131,14 @@ def localize_object(
         z = float(depth[vi, ui])
     else:
         z = float(np.median(depth[labels == label]))
+    position = back_project(u, v, z, K, cam2world)
+    if floor_z is None:
+        floor = back_project(centre[0], centre[1], floor_depth, K, cam2world)
+    else:
+        floor = np.array([position[0], position[1], floor_z])
     return Localization(
-        position_world=back_project(u, v, z, K, cam2world),
-        floor_world=back_project(centre[0], centre[1], floor_depth, K, cam2world),
+        position_world=position,
+        floor_world=floor,
         pixel=(u, v),
         area_px=int(stats[label, cv2.CC_STAT_AREA]),
         n_proposals=int(keep.size),
