@@ -44,6 +44,7 @@ def make_env(suite: Suite, *, render_mode: str | None = None) -> Any:
             num_envs=1,
             render_mode=render_mode,
             max_episode_steps=suite.horizon_steps,
+            disable_env_checker=True,
         )
     except gym.error.Error as exc:
         raise UsageError(f"suite {suite.name!r}: cannot make env {suite.env_id!r} ({exc})") from exc

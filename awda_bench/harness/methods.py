@@ -75,9 +75,13 @@ def method_names() -> list[str]:
 
 
 def get_method(name: str) -> MethodSpec:
-    if name not in _REGISTRY:
-        raise UnknownChoiceError("method", name, method_names())
-    return _REGISTRY[name]
+    """A registered method, or ``"module:attribute"`` naming a non-learned policy class/factory."""
+    if name in _REGISTRY:
+        return _REGISTRY[name]
+    if ":" in name:
+        resolve(name, what=f"method {name!r}")
+        return MethodSpec(name=name, target=name, description="imported policy")
+    raise UnknownChoiceError("method", name, [*method_names(), "module:attribute"])
 
 
 def resolve(target: str, *, what: str) -> Any:

@@ -3,7 +3,7 @@
 Tables::
 
     meta(key, value)                       schema version
-    protocols(fingerprint, suite, definition)      one protocol per suite per store
+    protocols(fingerprint, suite, display_name, definition)   one protocol per suite per store
     snapshots(protocol, method, snapshot, name, ord, learned, episodes_expected)   the plan
     episodes(protocol, method, snapshot, task, episode, ...)   PRIMARY KEY of those five
     runs(id, started_at, command, versions)
@@ -42,6 +42,7 @@ CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
 CREATE TABLE IF NOT EXISTS protocols (
     fingerprint TEXT PRIMARY KEY,
     suite TEXT NOT NULL UNIQUE,
+    display_name TEXT NOT NULL,
     definition TEXT NOT NULL
 );
 CREATE TABLE IF NOT EXISTS snapshots (
@@ -172,14 +173,14 @@ class ResultsStore:
 
     def plan(
         self, protocol: EvalProtocol, method: str, learned: bool, snapshots: Iterable[SnapshotRef],
-        episodes_expected: int, command: str, versions: dict[str, str],
+        episodes_expected: int, command: str, versions: dict[str, str], display_name: str = "",
     ) -> None:  # fmt: skip
         """Record the protocol, the snapshots about to be evaluated and this run's invocation."""
         self.check_protocol(protocol)
         with self._conn:
             self._conn.execute(
-                "INSERT OR IGNORE INTO protocols VALUES (?, ?, ?)",
-                (protocol.fingerprint, protocol.suite, protocol.to_json()),
+                "INSERT OR IGNORE INTO protocols VALUES (?, ?, ?, ?)",
+                (protocol.fingerprint, protocol.suite, display_name or protocol.suite, protocol.to_json()),
             )
             for snap in snapshots:
                 self._conn.execute(

@@ -140,7 +140,7 @@ def run_sweep(config: SweepConfig) -> SweepResult:
         store.check_protocol(plan.protocol)
         store.plan(
             plan.protocol, plan.method.name, plan.method.learned, plan.snapshots,
-            plan.expected_per_snapshot, config.command, software_versions(),
+            plan.expected_per_snapshot, config.command, software_versions(), plan.suite.display_name,
         )  # fmt: skip
         finished = {
             snap.sha256: store.finished_keys(fingerprint, plan.method.name, snap.sha256)

@@ -1,0 +1,164 @@
+"""From episode rows to cells: success per snapshot, then mean ± SE over snapshots.
+
+A snapshot's success rate is ``successes / ok episodes`` (errors are in neither count). A cell
+(suite or family x method) is the mean over the method's snapshots of their rates, with
+
+- ``se_kind == "snapshots"`` (two or more snapshots): SE = sample std (ddof 1) / sqrt(#snapshots);
+- ``se_kind == "binomial"`` (one snapshot): SE = sqrt(p (1 - p) / n) over its n ok episodes.
+
+Every function here reads only the store's tables, so the numbers can be recomputed from the rows.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import pandas as pd
+
+METRICS = ("success_once", "success_at_end")
+"""Success columns a report can use."""
+
+DEFAULT_METRIC = "success_once"
+"""``info["success"]`` at any step (the reference evaluations stop at the first success)."""
+
+S4_FAMILIES = (
+    ("door", "Door"), ("drawer", "Drawer"), ("press_button", "Press Button"),
+    ("stack_block", "Stack Block"), ("basketball", "Basketball"), ("nut_assembly", "Nut Assembly"),
+)  # fmt: skip
+"""Table S4's family ids (as in suite files) and column titles, in the paper's order."""
+
+ALL = "all"
+"""Group name of a whole suite (Table S3) or of all S4 families together."""
+
+
+def family_key(name: str) -> str:
+    """Normalize a family name (``"Press Button"``, ``"press-button"`` -> ``"press_button"``)."""
+    return name.strip().lower().replace("-", "_").replace(" ", "_")
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One table cell, as written to ``summary.json``."""
+
+    suite: str
+    """Suite name."""
+    group: str
+    """``"all"`` (the whole suite) or a task family."""
+    method: str
+    """Method name."""
+    metric: str
+    """Success column used."""
+    snapshots: int
+    """Snapshots with at least one ok episode (the samples of the mean)."""
+    snapshots_planned: int
+    """Snapshots planned for the method in the store."""
+    episodes: int
+    """Ok episodes (successes + failures)."""
+    successes: int
+    """Ok episodes that succeeded."""
+    errors: int
+    """Episodes recorded as errors (in no rate)."""
+    mean: float | None
+    """Mean over snapshots of the success rate (``None``: no ok episode)."""
+    se: float | None
+    """Standard error (see ``se_kind``)."""
+    se_kind: str
+    """``"snapshots"``, ``"binomial"`` or ``"none"``."""
+
+    def to_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+def per_snapshot(episodes: pd.DataFrame, snapshots: pd.DataFrame, metric: str) -> pd.DataFrame:
+    """One row per (suite, protocol, method, snapshot): ok, successes, errors, expected, rate."""
+    keys = ["protocol", "method", "snapshot"]
+    ok = episodes[episodes["status"] == "ok"]
+    counts = pd.DataFrame(
+        {
+            "ok": ok.groupby(keys).size(),
+            "successes": ok.groupby(keys)[metric].sum(),
+            "errors": episodes[episodes["status"] == "error"].groupby(keys).size(),
+        }
+    )
+    plan = snapshots.set_index(keys)[["name", "ord", "learned", "episodes_expected"]]
+    table = plan.join(counts, how="left").fillna({"ok": 0, "successes": 0, "errors": 0}).reset_index()
+    for column in ("ok", "successes", "errors"):
+        table[column] = table[column].astype(int)
+    table["recorded"] = table["ok"] + table["errors"]
+    table["rate"] = [s / n if n else math.nan for s, n in zip(table["successes"], table["ok"], strict=True)]
+    return table
+
+
+def mean_se(rates: list[float], successes: int, episodes: int) -> tuple[float | None, float | None, str]:
+    """Mean over snapshot rates and its SE (see the module docstring)."""
+    if not rates:
+        return None, None, "none"
+    mean = sum(rates) / len(rates)
+    if len(rates) == 1:
+        p = successes / episodes
+        return mean, math.sqrt(p * (1 - p) / episodes), "binomial"
+    var = sum((r - mean) ** 2 for r in rates) / (len(rates) - 1)
+    return mean, math.sqrt(var / len(rates)), "snapshots"
+
+
+def make_cell(
+    rows: pd.DataFrame, plan: pd.DataFrame, *, suite: str, group: str, method: str, metric: str
+) -> Cell:
+    """A cell from the episode rows of one (suite, group, method) and the method's snapshot plan."""
+    ok = rows[rows["status"] == "ok"]
+    rates, total_s, total_n = [], 0, 0
+    for snapshot in plan["snapshot"]:
+        snap_rows = ok[ok["snapshot"] == snapshot]
+        if len(snap_rows):
+            s = int(snap_rows[metric].sum())
+            rates.append(s / len(snap_rows))
+            total_s += s
+            total_n += len(snap_rows)
+    mean, se, kind = mean_se(rates, total_s, total_n)
+    return Cell(
+        suite=suite, group=group, method=method, metric=metric, snapshots=len(rates),
+        snapshots_planned=len(plan), episodes=total_n, successes=total_s,
+        errors=int((rows["status"] == "error").sum()), mean=mean, se=se, se_kind=kind,
+    )  # fmt: skip
+
+
+def all_cells(episodes: pd.DataFrame, snapshots: pd.DataFrame, protocols: pd.DataFrame, metric: str) -> list[Cell]:
+    """Every cell: per (suite, method) the whole suite, and each family of the suite."""
+    if metric not in METRICS:
+        raise ValueError(f"metric must be one of {METRICS}")
+    cells = []
+    for _, proto in protocols.iterrows():
+        rows_p = episodes[episodes["protocol"] == proto["fingerprint"]]
+        plans_p = snapshots[snapshots["protocol"] == proto["fingerprint"]]
+        for method in sorted(plans_p["method"].unique()):
+            rows = rows_p[rows_p["method"] == method]
+            plan = plans_p[plans_p["method"] == method].sort_values("ord")
+            common = dict(suite=proto["suite"], method=method, metric=metric)
+            cells.append(make_cell(rows, plan, group=ALL, **common))
+            families = sorted({family_key(f) for f in rows["family"]})
+            if len(families) > 1:
+                keyed = rows["family"].map(family_key)
+                for family in families:
+                    cells.append(make_cell(rows[keyed == family], plan, group=family, **common))
+            s4 = [k for k, _ in S4_FAMILIES if k in families]
+            if s4 and set(s4) != set(families):
+                cells.append(make_cell(rows[rows["family"].map(family_key).isin(s4)], plan, group="s4_all", **common))
+    return cells
+
+
+def grasp_analysis(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
+    """Per (suite, method): ok episodes and reached / grasped / success rates over them.
+
+    A rate is ``None`` when the env does not report that flag for every episode.
+    """
+    ok = episodes[episodes["status"] == "ok"]
+    out = []
+    for (suite, method), g in ok.groupby(["suite", "method"], sort=True):
+        row = {"suite": suite, "method": method, "episodes": len(g)}
+        for column in ("reached", "grasped"):
+            known = g[column].dropna()
+            row[column] = float(known.mean()) if len(known) == len(g) and len(g) else None
+        row["success"] = float(g[metric].mean())
+        out.append(row)
+    return pd.DataFrame(out, columns=["suite", "method", "episodes", "reached", "grasped", "success"])

@@ -1,0 +1,158 @@
+"""``report``: read a run directory's store, write tables (Markdown, CSV, LaTeX), figures and
+``summary.json`` under the report directory.
+
+Written files::
+
+    report.md                   header (protocols, episode counts, metric, versions) + every table
+    s3.{md,csv,tex}             rows = suites, columns = methods, mean ± SE
+    s4.{md,csv,tex}             MOSAIC families + All (only when such families were evaluated)
+    per_snapshot.{md,csv,tex}   success per snapshot, every method
+    grasp.{md,csv,tex}          reached / grasped / success per (suite, method)
+    counts.{md,csv,tex}         expected vs recorded episodes, errors
+    errors.{md,csv,tex}         one line per error episode (when there are any)
+    figures/success_vs_snapshot_<suite>_<method>.png   learned methods
+    summary.json                every cell, for other tools
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from awda_bench.errors import UsageError
+from awda_bench.harness import aggregate, tables
+from awda_bench.harness.figures import plot_success_vs_snapshot
+from awda_bench.harness.results_store import ResultsStore
+from awda_bench.harness.sweep import software_versions
+
+METRIC_TEXT = {
+    "success_once": 'success_once: info["success"] was true at some step of the episode',
+    "success_at_end": 'success_at_end: info["success"] was true at the last step played',
+}
+
+
+@dataclass
+class ReportResult:
+    """What ``write_report`` produced."""
+
+    out_dir: Path
+    """Report directory."""
+    files: list[Path] = field(default_factory=list)
+    """Every file written."""
+    warnings: list[str] = field(default_factory=list)
+    """Loud problems: missing episodes, errors."""
+
+
+def count_table(per_snap: pd.DataFrame, protocols: pd.DataFrame) -> pd.DataFrame:
+    """Expected vs recorded episodes per (suite, method)."""
+    suites = protocols.set_index("fingerprint")["suite"]
+    rows = []
+    for (proto, method), g in per_snap.groupby(["protocol", "method"], sort=True):
+        expected, ok, err = int(g["episodes_expected"].sum()), int(g["ok"].sum()), int(g["errors"].sum())
+        missing = expected - ok - err
+        check = "OK" if missing == 0 and err == 0 else "MISMATCH" if missing else "ERRORS"
+        rows.append({"suite": suites[proto], "method": method, "protocol": proto, "snapshots": len(g),
+                     "expected": expected, "ok": ok, "errors": err, "missing": missing, "check": check})  # fmt: skip
+    return pd.DataFrame(rows).set_index("suite")
+
+
+def _header(store: ResultsStore, protocols: pd.DataFrame, counts: pd.DataFrame, metric: str, warnings: list[str]) -> str:
+    lines = ["# awda_bench report", "", f"Store: `{store.path}`  ", f"Generated: {time.strftime('%Y-%m-%d %H:%M:%S %z')}", ""]
+    lines += [f"**Success metric:** {METRIC_TEXT[metric]}.  ",
+              "Both success_once and success_at_end are recorded; `report --metric` switches.  ",
+              f"**Cells:** mean over snapshots of each snapshot's success rate ± standard error across snapshots; "
+              f"`{tables.BINOMIAL_MARK}` marks a single snapshot, whose SE is binomial over its episodes. "
+              "Errors (`err`) are in no rate.", ""]  # fmt: skip
+    if warnings:
+        lines += ["## ⚠ WARNINGS", ""] + [f"- **{w}**" for w in warnings] + [""]
+    lines += ["## Protocols", "", "| suite | fingerprint | episodes | unit | base seed | horizon steps | evaluated tasks | suite file sha256 |", "|---|---|---:|---|---:|---:|---|---|"]
+    for _, p in protocols.iterrows():
+        d = json.loads(p["definition"])
+        lines.append(f"| {p['suite']} | `{p['fingerprint']}` | {d['episodes']} | {d['episode_unit']} | {d['base_seed']} | "
+                     f"{d['horizon_steps']} | {d['eval_tasks']} | `{d['suite_sha256'][:12]}` |")  # fmt: skip
+    lines += ["", "## Episode counts (expected vs recorded)", "", tables.to_markdown(counts)]
+    lines += ["## Software", ""]
+    runs = store.runs()
+    if len(runs):
+        latest = runs.groupby(["protocol", "method"]).tail(1)
+        suites = protocols.set_index("fingerprint")["suite"]
+        for _, r in latest.iterrows():
+            v = json.loads(r["versions"])
+            listed = ", ".join(f"{k} {val}" for k, val in sorted(v.items()))
+            lines.append(f"- run of {suites.get(r['protocol'], r['protocol'])}/{r['method']}: {listed}")
+    listed = ", ".join(f"{k} {val}" for k, val in sorted(software_versions().items()))
+    lines += [f"- this report: {listed}", ""]
+    return "\n".join(lines)
+
+
+def write_report(run_dir: Path, out_dir: Path, metric: str = aggregate.DEFAULT_METRIC) -> ReportResult:
+    """Read ``run_dir``'s store and write every table and figure into ``out_dir``."""
+    if metric not in aggregate.METRICS:
+        raise UsageError(f"unknown metric {metric!r}; choose one of: {', '.join(aggregate.METRICS)}")
+    result = ReportResult(out_dir=out_dir)
+    with ResultsStore(run_dir, create=False) as store:
+        episodes, snapshots, protocols = store.episodes(), store.snapshots(), store.protocols()
+        if episodes.empty:
+            raise UsageError(f"{store.path} holds no episodes yet; run `python -m awda_bench run` first")
+        per_snap = aggregate.per_snapshot(episodes, snapshots, metric)
+        cells = aggregate.all_cells(episodes, snapshots, protocols, metric)
+        counts = count_table(per_snap, protocols)
+        for suite, row in counts.iterrows():
+            if row["missing"]:
+                result.warnings.append(
+                    f"{suite}/{row['method']}: expected {row['expected']} episodes, recorded {row['ok'] + row['errors']} "
+                    f"({row['missing']} missing) — re-run the same command to finish"
+                )
+            if row["errors"]:
+                result.warnings.append(f"{suite}/{row['method']}: {row['errors']} episodes ended in errors (see errors.md)")
+        header = _header(store, protocols, counts, metric, result.warnings)
+
+    suite_of = protocols.set_index("fingerprint")["suite"]
+    display = dict(zip(protocols["suite"], protocols["display_name"], strict=True))
+    sections: list[tuple[str, str, pd.DataFrame]] = [
+        ("s3", "Table S3: success per suite (held-out tasks)", tables.table_s3(cells, display)),
+    ]
+    s4 = tables.table_s4(cells)
+    if s4 is not None:
+        sections.append(("s4", "Table S4: success per family", s4))
+    snap_table = per_snap.assign(suite=per_snap["protocol"].map(suite_of))[
+        ["suite", "method", "ord", "name", "snapshot", "episodes_expected", "ok", "errors", "successes", "rate"]
+    ].set_index("suite")
+    sections.append(("per_snapshot", "Success per snapshot", snap_table))
+    grasp = aggregate.grasp_analysis(episodes, metric).set_index("suite")
+    sections.append(("grasp", "Grasp analysis (rates over ok episodes; – = env does not report it)", grasp))
+    sections.append(("counts", "Episode counts", counts))
+    errors = episodes[episodes["status"] == "error"]
+    if len(errors):
+        err_table = errors.assign(
+            last_line=errors["error"].fillna("").map(lambda e: (e.strip().splitlines() or [""])[-1][:160])
+        )[["suite", "method", "snapshot", "task", "episode", "seed", "attempts", "last_line"]].set_index("suite")
+        sections.append(("errors", "Errors (full tracebacks in the store)", err_table))
+
+    body = [header]
+    for stem, title, df in sections:
+        result.files += tables.write_table(df, out_dir, stem)
+        if stem != "counts":  # already in the header
+            body += [f"## {title}", "", tables.to_markdown(df)]
+
+    for (proto, method), g in per_snap.groupby(["protocol", "method"]):
+        if bool(g["learned"].any()):
+            path = out_dir / "figures" / f"success_vs_snapshot_{suite_of[proto]}_{method}.png"
+            result.files.append(plot_success_vs_snapshot(g.sort_values("ord"), f"{suite_of[proto]} / {method} ({metric})", path))
+
+    summary = {
+        "metric": metric,
+        "protocols": {r["suite"]: {"fingerprint": r["fingerprint"], **json.loads(r["definition"])} for _, r in protocols.iterrows()},
+        "counts": counts.reset_index().to_dict(orient="records"),
+        "cells": [c.to_dict() for c in cells],
+        "warnings": result.warnings,
+    }
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=int) + "\n")
+    (out_dir / "report.md").write_text("\n".join(body))
+    result.files += [out_dir / "summary.json", out_dir / "report.md"]
+    return result

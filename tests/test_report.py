@@ -1,0 +1,146 @@
+import json
+import math
+import sqlite3
+from pathlib import Path
+
+import pytest
+
+from awda_bench.errors import UsageError
+from awda_bench.harness.aggregate import family_key, mean_se
+from awda_bench.harness.methods import MethodSpec, register_method, unregister_method
+from awda_bench.harness.report import write_report
+from awda_bench.harness.results_store import STORE_NAME
+from awda_bench.harness.sweep import SweepConfig, run_sweep
+from awda_bench.harness.tables import to_latex, to_markdown
+from harness_fakes import write_fake_suite, write_snapshots
+
+FAKES = "harness_fakes"
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("report")
+    suites = root / "tasks"
+    suites.mkdir()
+    write_fake_suite(suites)
+    specs = [
+        MethodSpec("fake", f"{FAKES}:SkillPolicy"),
+        MethodSpec("raising", f"{FAKES}:RaisingPolicy"),
+        MethodSpec("learned", f"{FAKES}:SkillPolicy", learned=True,
+                   list_snapshots=f"{FAKES}:list_snapshots", load_snapshot=f"{FAKES}:load_snapshot"),
+    ]  # fmt: skip
+    for spec in specs:
+        register_method(spec)
+    ckpt = write_snapshots(root / "ckpt", [0.1, 0.4, 0.6, 0.9])[0].parent
+    out = root / "runs"
+    common = dict(suite="fake", out=out, suites_dir=suites, workers=0, progress=False, command="t", episodes=6)
+    run_sweep(SweepConfig(method="fake", **common))
+    run_sweep(SweepConfig(method="raising", **common))
+    run_sweep(SweepConfig(method="learned", checkpoints=ckpt, snapshots=3, **common))
+    for spec in specs:
+        unregister_method(spec.name)
+    return out
+
+
+def _recompute(store: Path, metric: str) -> dict[tuple[str, str], tuple[float, float, str, int]]:
+    """Mean ± SE per (method, group) straight from the rows, written independently of aggregate.py."""
+    db = sqlite3.connect(store)
+    rows = db.execute(f"SELECT method, snapshot, family, status, {metric} FROM episodes").fetchall()
+    planned = db.execute("SELECT method, snapshot FROM snapshots").fetchall()
+    out = {}
+    for group in ("all", "drawer", "press_button"):
+        for method in {m for m, _ in planned}:
+            rates, s_all, n_all, errors = [], 0, 0, 0
+            for m, snap in planned:
+                if m != method:
+                    continue
+                sel = [r for r in rows if r[0] == m and r[1] == snap and (group == "all" or r[2] == group)]
+                errors += sum(r[3] == "error" for r in sel)
+                ok = [r[4] for r in sel if r[3] == "ok"]
+                if ok:
+                    rates.append(sum(ok) / len(ok))
+                    s_all += sum(ok)
+                    n_all += len(ok)
+            mean = sum(rates) / len(rates)
+            if len(rates) == 1:
+                se = math.sqrt(mean * (1 - mean) / n_all)
+            else:
+                se = math.sqrt(sum((r - mean) ** 2 for r in rates) / (len(rates) - 1) / len(rates))
+            out[(method, group)] = (mean, se, "binomial" if len(rates) == 1 else "snapshots", errors)
+    return out
+
+
+@pytest.mark.parametrize("metric", ["success_once", "success_at_end"])
+def test_summary_equals_a_recomputation_from_the_rows(run_dir: Path, tmp_path: Path, metric: str) -> None:
+    write_report(run_dir, tmp_path, metric)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    expected = _recompute(run_dir / STORE_NAME, metric)
+    got = {(c["method"], c["group"]): c for c in summary["cells"]}
+    assert set(got) == set(expected)
+    for key, (mean, se, kind, errors) in expected.items():
+        cell = got[key]
+        assert cell["mean"] == pytest.approx(mean) and cell["se"] == pytest.approx(se)
+        assert (cell["se_kind"], cell["errors"], cell["metric"]) == (kind, errors, metric)
+    # the learned method's snapshots differ in skill, so its mean is not any single rate
+    assert got[("learned", "all")]["snapshots"] == 3
+
+
+def test_tables_show_the_cells_and_flag_errors(run_dir: Path, tmp_path: Path) -> None:
+    result = write_report(run_dir, tmp_path)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    cell = next(c for c in summary["cells"] if c["method"] == "learned" and c["group"] == "all")
+    s3 = (tmp_path / "s3.md").read_text()
+    assert f"{cell['mean']:.2f} ± {cell['se']:.2f}" in s3
+    assert "Fake suite" in s3 and "†" in s3  # one-snapshot methods are marked binomial
+    assert "(2 err)" in s3  # raising: episode 1 of both tasks
+    s4 = (tmp_path / "s4.csv").read_text().splitlines()
+    assert s4[0] == "Method,Door,Drawer,Press Button,Stack Block,Basketball,Nut Assembly,All"
+    assert (tmp_path / "figures" / "success_vs_snapshot_fake_learned.png").stat().st_size > 1000
+    assert any("raising: 2 episodes ended in errors" in w for w in result.warnings)
+    report = (tmp_path / "report.md").read_text()
+    assert "## ⚠ WARNINGS" in report and summary["protocols"]["fake"]["fingerprint"] in report
+    assert "success_once" in report and "mani-skill" in report
+    assert "RuntimeError: boom in act" in (tmp_path / "errors.md").read_text()
+    assert r"$\pm$" in (tmp_path / "s3.tex").read_text()
+    grasp = (tmp_path / "grasp.csv").read_text()
+    assert grasp.splitlines()[0] == "suite,method,episodes,reached,grasped,success"
+
+
+def test_missing_episodes_are_flagged(tmp_path: Path) -> None:
+    suites = tmp_path / "tasks"
+    suites.mkdir()
+    write_fake_suite(suites)
+    register_method(MethodSpec("fake", f"{FAKES}:SkillPolicy"))
+    try:
+        run_sweep(SweepConfig(suite="fake", method="fake", out=tmp_path / "runs", suites_dir=suites,
+                              workers=0, progress=False, command="t", episodes=3, tasks=(3,)))  # fmt: skip
+    finally:
+        unregister_method("fake")
+    result = write_report(tmp_path / "runs", tmp_path / "rep")
+    assert result.warnings == ["fake/fake: expected 6 episodes, recorded 3 (3 missing) — re-run the same command to finish"]
+    assert "MISMATCH" in (tmp_path / "rep" / "counts.md").read_text()
+
+
+def test_report_refuses_a_missing_store(tmp_path: Path) -> None:
+    with pytest.raises(UsageError, match="no results store"):
+        write_report(tmp_path / "nothing", tmp_path / "rep")
+    with pytest.raises(UsageError, match="unknown metric"):
+        write_report(tmp_path, tmp_path / "rep", "success_sometimes")
+
+
+def test_mean_se_rules() -> None:
+    assert mean_se([], 0, 0) == (None, None, "none")
+    mean, se, kind = mean_se([0.5], 5, 10)
+    assert (mean, kind) == (0.5, "binomial") and se == pytest.approx(math.sqrt(0.025))
+    mean, se, kind = mean_se([0.2, 0.4, 0.6], 12, 30)
+    assert (kind, mean) == ("snapshots", pytest.approx(0.4)) and se == pytest.approx(0.2 / math.sqrt(3))
+    assert family_key("Press Button") == family_key("press-button") == "press_button"
+
+
+def test_markdown_and_latex_renderings() -> None:
+    import pandas as pd
+
+    df = pd.DataFrame({"a_b": ["0.50 ± 0.10†"], "c": [float("nan")]}, index=pd.Index(["x&y"], name="Suite"))
+    assert to_markdown(df).splitlines() == ["| Suite | a_b | c |", "|---|---:|---:|", "| x&y | 0.50 ± 0.10† | – |"]
+    tex = to_latex(df)
+    assert r"x\&y & 0.50 $\pm$ 0.10$^\dagger$ & -- \\" in tex and r"a\_b" in tex
