@@ -107,8 +107,10 @@ class PandaAWDA(Panda):
     def set_action(self, action: object) -> None:
         """Validate the action (shape, finite) before the controller sees it; ``ValueError`` otherwise."""
         if self.control_mode == CONTROL_MODE:
-            action = validate_action(action, self.scene.num_envs, ACTION_DIM).to(self.device)
-        super().set_action(action)
+            # validate_action already refused NaN/inf, so BaseAgent's own NaN check is skipped.
+            self.controller.set_action(validate_action(action, self.scene.num_envs, ACTION_DIM).to(self.device))
+        else:
+            super().set_action(action)
 
     @property
     def gripper_opening_m(self) -> torch.Tensor:

@@ -88,3 +88,30 @@ def capture_wrist_depth(env, uid: str = WRIST_CAMERA) -> DepthFrame:
         intrinsic_cv=intrinsic.astype(np.float64),
         cam2world_cv=np.linalg.inv(world2cam),
     )
+
+
+def third_person_camera_config(
+    eye: tuple[float, float, float] = (0.75, 0.0, 0.85),
+    target: tuple[float, float, float] = (-0.2, 0.0, 0.15),
+    height: int = 240,
+    width: int = 320,
+    fov_rad: float = 1.0,
+):
+    """``CameraConfig`` of the policy's third-person RGB camera ``third_person``.
+
+    Defaults: 240×320 (H×W) like the reference pick-and-place images, looking from the far side of
+    the table back at the robot so the arm and the workspace are both in view. Tasks return it from
+    ``_default_sensor_configs``; with ``obs_mode="state"`` it renders only through :func:`capture_rgb`.
+    """
+    from mani_skill.sensors.camera import CameraConfig
+    from mani_skill.utils import sapien_utils
+
+    return CameraConfig(
+        uid=THIRD_PERSON_CAMERA,
+        pose=sapien_utils.look_at(eye=list(eye), target=list(target)),
+        width=width,
+        height=height,
+        fov=fov_rad,
+        near=0.01,
+        far=10.0,
+    )

@@ -47,10 +47,23 @@ class MinkEEPosController(PDJointPosController):
     def _initialize_action_space(self) -> None:
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
 
+    _base_rotation_cache: np.ndarray | None = None
+
+    def reset(self) -> None:
+        super().reset()
+        self._base_rotation_cache = None
+
+    def set_state(self, state: dict) -> None:
+        super().set_state(state)
+        self._base_rotation_cache = None
+
     def _base_rotation(self) -> np.ndarray:
-        """(n, 3, 3) rotation of the robot base in the world."""
-        pose = self.articulation.root.pose
-        return pose.to_transformation_matrix()[:, :3, :3].cpu().numpy().astype(np.float64)
+        """(n, 3, 3) rotation of the robot base in the world, read once per episode (fixed base)."""
+        if self._base_rotation_cache is None:
+            pose = self.articulation.root.pose
+            matrix = pose.to_transformation_matrix()[:, :3, :3].cpu().numpy().astype(np.float64)
+            self._base_rotation_cache = matrix
+        return self._base_rotation_cache
 
     def set_action(self, action: torch.Tensor) -> None:
         self._step = 0
@@ -96,19 +109,44 @@ class MinkEEPosControllerConfig(PDJointPosControllerConfig):
 
 
 class BinaryGripperController(PDJointPosMimicController):
-    """One number per env: > 0 drives the fingers closed, <= 0 open."""
+    """One number per env: > 0 drives the fingers closed, <= 0 open.
+
+    The drive targets are written only when the command changes (they persist in PhysX); the
+    command is controller state, so ``get_state``/``set_state`` carry it and restoring re-applies it.
+    """
 
     config: BinaryGripperControllerConfig
+    _closed: torch.Tensor | None = None
 
     def _initialize_action_space(self) -> None:
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
 
+    def reset(self) -> None:
+        super().reset()
+        self._closed = None
+
+    def get_state(self) -> dict:
+        if self._closed is None:
+            return {}
+        return {"closed": self._closed.clone()}
+
+    def set_state(self, state: dict) -> None:
+        self._closed = None
+        if "closed" in state:
+            self._apply(state["closed"].to(self.device))
+
     def set_action(self, action: torch.Tensor) -> None:
         closed = action[:, :1] > 0
+        if self._closed is not None and torch.equal(closed, self._closed):
+            return
+        self._apply(closed)
+
+    def _apply(self, closed: torch.Tensor) -> None:
+        self._closed = closed.clone()
         target = torch.where(
             closed,
-            torch.full_like(action[:, :1], self.config.closed_qpos_m),
-            torch.full_like(action[:, :1], self.config.open_qpos_m),
+            torch.full(closed.shape, self.config.closed_qpos_m, device=self.device),
+            torch.full(closed.shape, self.config.open_qpos_m, device=self.device),
         )
         self._step = 0
         self._start_qpos = self.qpos

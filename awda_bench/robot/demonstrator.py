@@ -9,8 +9,9 @@ floats like a mocap hand).
 
 Its controller has the semantics of the agent's ``pd_ee_delta_pos_mink``::
 
-    action[:, 0:3] in [-1, 1] -> target_xyz += action * max_step_m   (world axes; no IK needed:
-                                  the root's three prismatic joints *are* the TCP translation)
+    action[:, 0:3] in [-1, 1] -> target_xyz = measured_xyz + action * max_step_m
+                                  (world axes; no IK needed: the root's three prismatic joints
+                                  *are* the TCP translation, as p* = FK(q) + delta for the agent)
     target_xyz clipped to [workspace_low_m, workspace_high_m] (root-joint coordinates)
     rotation joints held at their reset values (pointing down)
     action[:, 3] > 0 closes the fingers, <= 0 opens them
@@ -65,7 +66,7 @@ class FloatingDeltaPosController(PDJointPosController):
         low = torch.as_tensor(self.config.workspace_low_m, dtype=commands.dtype, device=self.device)
         high = torch.as_tensor(self.config.workspace_high_m, dtype=commands.dtype, device=self.device)
         target = self._target_qpos.clone()
-        target[:, :3] = torch.clamp(target[:, :3] + commands * self.config.max_step_m, low, high)
+        target[:, :3] = torch.clamp(self.qpos[:, :3] + commands * self.config.max_step_m, low, high)
         self._target_qpos = target
         self.set_drive_targets(self._target_qpos)
 
@@ -166,7 +167,6 @@ class AwdaDemonstrator(FloatingPandaGripper):
             stiffness=self.root_stiffness,
             damping=self.root_damping,
             force_limit=self.root_force_limit,
-            use_target=True,
         )
         gripper = ClosePositiveGripperControllerConfig(
             joint_names=self.gripper_joint_names,

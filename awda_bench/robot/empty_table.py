@@ -30,6 +30,12 @@ class EmptyTableEnv(BaseEnv):
     def __init__(self, *args, robot_uids: str = "panda_awda", **kwargs) -> None:
         super().__init__(*args, robot_uids=robot_uids, **kwargs)
 
+    @property
+    def _default_sensor_configs(self) -> list:
+        from awda_bench.robot.cameras import third_person_camera_config
+
+        return [third_person_camera_config()]
+
     def _load_agent(self, options: dict) -> None:
         import sapien
 

@@ -1,0 +1,73 @@
+"""Controller benchmark: env steps/s of mink IK vs ManiSkill's own IK vs raw joint targets.
+
+All three run on the same scene (``AWDA-EmptyTable-v1``, the ``panda_awda`` agent, state
+observations, CPU physics) in interleaved rounds, so background load hits them alike; the median
+round is reported. Actions trace the same slow circle for the two end-effector modes; the joint
+mode replays joint targets recorded from the mink run, so all three move the arm alike.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+
+import numpy as np
+
+MODES = ("pd_ee_delta_pos_mink", "pd_ee_delta_pos", "pd_joint_pos")
+"""Control modes compared (first = ours)."""
+
+
+def add_controller_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--steps", type=int, default=300, help="env steps per round (default %(default)s)")
+    parser.add_argument("--rounds", type=int, default=3, help="interleaved rounds per mode (default %(default)s)")
+
+
+def _circle_action(t: int, scale: float) -> np.ndarray:
+    return np.array([scale * np.sin(t / 15), scale * np.cos(t / 15), 0.2 * np.sin(t / 40), -1.0])
+
+
+def run_controller_bench(args: argparse.Namespace) -> int:
+    import gymnasium as gym
+
+    import awda_bench.robot  # noqa: F401
+
+    envs = {
+        mode: gym.make("AWDA-EmptyTable-v1", obs_mode="state", reward_mode="none", control_mode=mode)
+        for mode in MODES
+    }
+    # ManiSkill's pd_ee_delta_pos spans +-0.1 m per unit action; ours +-0.02 m: same motion.
+    scales = {"pd_ee_delta_pos_mink": 0.5, "pd_ee_delta_pos": 0.1}
+    joint_targets: list[np.ndarray] = []
+    rates: dict[str, list[float]] = {mode: [] for mode in MODES}
+    for _round in range(args.rounds):
+        for mode, env in envs.items():
+            env.reset(seed=0)
+            agent = env.unwrapped.agent
+            if mode == "pd_joint_pos":
+                if not joint_targets:
+                    raise RuntimeError("joint targets are recorded from the mink run, which must come first")
+                actions = [np.concatenate([q, [0.04]]) for q in joint_targets[: args.steps]]
+            else:
+                actions = [_circle_action(t, scales[mode]) for t in range(args.steps)]
+            start = time.perf_counter()
+            for action in actions:
+                env.step(action)
+                if mode == "pd_ee_delta_pos_mink" and len(joint_targets) < args.steps:
+                    joint_targets.append(agent.controller.controllers["arm"]._target_qpos[0].cpu().numpy())
+            rates[mode].append(args.steps / (time.perf_counter() - start))
+    for env in envs.values():
+        env.close()
+
+    median = {mode: statistics.median(values) for mode, values in rates.items()}
+    ours = median["pd_ee_delta_pos_mink"]
+    print(f"controller benchmark: AWDA-EmptyTable-v1, state obs, CPU sim, {args.rounds} rounds x {args.steps} steps")
+    print(f"{'control mode':<24}{'steps/s (median)':>18}{'rounds':>28}{'mink / this':>14}")
+    for mode in MODES:
+        rounds = ", ".join(f"{r:.0f}" for r in rates[mode])
+        print(f"{mode:<24}{median[mode]:>18.1f}{rounds:>28}{ours / median[mode]:>14.2f}")
+    print(
+        f"mink vs ManiSkill pd_ee_delta_pos: {ours / median['pd_ee_delta_pos']:.2f}x (goal >= 1.3); "
+        f"mink vs pd_joint_pos: {ours / median['pd_joint_pos']:.2f}x (goal >= 0.85)"
+    )
+    return 0
