@@ -1,0 +1,139 @@
+import hashlib
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from awda_bench.cli import main
+from awda_bench.harness.methods import MethodSpec, register_method, unregister_method
+from awda_bench.harness.results_store import STORE_NAME
+from harness_fakes import write_fake_suite, write_snapshots
+
+TESTS = Path(__file__).resolve().parent
+FAKES = "harness_fakes"
+
+
+@pytest.fixture
+def suites(tmp_path: Path) -> Path:
+    d = tmp_path / "tasks"
+    d.mkdir()
+    write_fake_suite(d)
+    return d
+
+
+@pytest.fixture
+def learned():
+    register_method(MethodSpec("learned", f"{FAKES}:SkillPolicy", learned=True,
+                               list_snapshots=f"{FAKES}:list_snapshots", load_snapshot=f"{FAKES}:load_snapshot"))  # fmt: skip
+    yield
+    unregister_method("learned")
+
+
+def _run(suites: Path, out: Path, *extra: str) -> int:
+    argv = ["run", "--suite", "fake", "--tasks-dir", str(suites), "--out", str(out), "--no-progress", "--workers", "0"]
+    return main([*argv, *extra])
+
+
+def test_run_then_report_end_to_end(tmp_path: Path, suites: Path, capsys) -> None:
+    out = tmp_path / "runs"
+    assert _run(suites, out, "--method", f"{FAKES}:SkillPolicy", "--quick") == 0
+    assert "6 episodes planned, 0 already done, 6 played (0 errors)" in capsys.readouterr().out
+    assert main(["report", "--runs", str(out), "--out", str(tmp_path / "rep")]) == 0
+    s3 = (tmp_path / "rep" / "s3.md").read_text()
+    assert "harness_fakes:SkillPolicy" in s3 and "Fake suite" in s3
+    assert _run(suites, out, "--method", f"{FAKES}:SkillPolicy", "--quick") == 0
+    assert "6 already done, 0 played" in capsys.readouterr().out
+
+
+def test_errors_make_exit_code_1_and_are_kept(tmp_path: Path, suites: Path, capsys) -> None:
+    assert _run(suites, tmp_path / "runs", "--method", f"{FAKES}:RaisingPolicy", "--episodes", "2") == 1
+    assert "2 episodes ended in errors" in capsys.readouterr().err
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_bad_input_is_one_line_exit_2_and_leaves_the_store_alone(tmp_path: Path, suites: Path, learned, capsys) -> None:
+    out = tmp_path / "runs"
+    assert _run(suites, out, "--method", f"{FAKES}:SkillPolicy", "--episodes", "2") == 0
+    before = _digest(out / STORE_NAME)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    corrupt = write_snapshots(tmp_path / "corrupt", [0.3, 0.4])[1]
+    corrupt.write_bytes(b"\x00\x01 not json")
+    cases = [
+        (["--suite", "nope"], "unknown suite 'nope'"),
+        (["--method", "nope"], "unknown method 'nope'"),
+        (["--method", "no_such_module:Policy"], "cannot import no_such_module"),
+        (["--task", "7"], "unknown task of suite 'fake' 7"),
+        (["--method", "learned"], "pass --checkpoints DIR"),
+        (["--method", "learned", "--checkpoints", str(empty)], "holds no snapshots"),
+        (["--method", "learned", "--checkpoints", str(tmp_path / "missing")], "does not exist"),
+        (["--method", "learned", "--checkpoints", str(corrupt.parent)], "step_20000.json is not valid JSON"),
+        (["--method", f"{FAKES}:SkillPolicy", "--episodes", "3"], "under protocol"),
+        (["--method", f"{FAKES}:SkillPolicy", "--seed", "1", "--episodes", "2"], "base_seed=0->1"),
+    ]
+    for extra, message in cases:
+        argv = ["run", "--suite", "fake", "--tasks-dir", str(suites), "--out", str(out), "--no-progress", *extra]
+        if "--suite" in extra:
+            argv = argv[:1] + argv[3:]
+        assert main(argv) == 2, extra
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and err.count("\n") == 1 and message in err, (extra, err)
+    assert _digest(out / STORE_NAME) == before
+    assert main(["report", "--runs", str(tmp_path / "none")]) == 2
+
+
+def _outcomes(out: Path) -> list[tuple]:
+    db = sqlite3.connect(out / STORE_NAME)
+    return db.execute(
+        "SELECT task, episode, seed, status, success_once, success_at_end, steps FROM episodes ORDER BY task, episode"
+    ).fetchall()
+
+
+def _recorded(store: Path) -> int:
+    if not store.exists():
+        return 0
+    db = sqlite3.connect(store)
+    if not db.execute("SELECT 1 FROM sqlite_master WHERE name='episodes'").fetchone():
+        return 0  # the schema is being created
+    return db.execute("SELECT COUNT(*) FROM episodes").fetchone()[0]
+
+
+@pytest.mark.slow
+def test_sigkill_mid_sweep_then_resume_equals_an_uninterrupted_run(tmp_path: Path, suites: Path) -> None:
+    args = ["--suite", "fake", "--tasks-dir", str(suites), "--method", f"{FAKES}:SlowPolicy",
+            "--episodes", "8", "--workers", "2", "--no-progress"]  # fmt: skip
+    env = {**os.environ, "PYTHONPATH": str(TESTS), "AWDA_FAKE_SLEEP_S": "0.1", "OMP_NUM_THREADS": "1"}
+    killed = tmp_path / "killed"
+    command = [sys.executable, "-m", "awda_bench", "run", *args, "--out", str(killed)]
+    proc = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    store = killed / STORE_NAME
+    deadline = time.monotonic() + 120
+    try:
+        while time.monotonic() < deadline:
+            if _recorded(store) >= 4:
+                break
+            time.sleep(0.2)
+        proc.send_signal(signal.SIGKILL)
+    finally:
+        proc.wait(timeout=30)
+    partial = len(_outcomes(killed))
+    assert 4 <= partial < 16
+    assert subprocess.run(command, env=env, timeout=300).returncode == 0
+    whole = tmp_path / "whole"
+    assert subprocess.run([sys.executable, "-m", "awda_bench", "run", *args, "--workers", "1", "--out", str(whole)],
+                          env=env, timeout=300).returncode == 0  # fmt: skip
+    assert _outcomes(killed) == _outcomes(whole) and len(_outcomes(whole)) == 16
+    db = sqlite3.connect(killed / STORE_NAME)
+    assert db.execute("SELECT COUNT(*), COUNT(DISTINCT task || '/' || episode) FROM episodes").fetchone() == (16, 16)
+    for name in ("killed", "whole"):
+        assert main(["report", "--runs", str(tmp_path / name), "--out", str(tmp_path / f"rep-{name}")]) == 0
+    assert (tmp_path / "rep-killed" / "s3.md").read_text() == (tmp_path / "rep-whole" / "s3.md").read_text()
+    assert "⚠ WARNINGS" not in (tmp_path / "rep-killed" / "report.md").read_text()
