@@ -177,3 +177,15 @@ def test_world_heights_handle_a_tilted_camera_where_literal_depths_do_not() -> N
         depth, CAM.K, T, LocalizationConfig(height_reference="depth", max_area_px=10**6)
     )
     assert literal is not None and literal.n_proposals >= 2  # the near floor became a proposal
+
+
+def test_edge_cut_separates_an_object_from_a_wall_it_touches_in_the_image() -> None:
+    wall = Box(center_xy=np.array([0.0, 0.07]), size=np.array([0.4, 0.03, 0.06]))
+    obj = _box(0.0, 0.035, sx=0.04, sy=0.04, h=0.14)  # touches the wall's side
+    cam = [0.0, 0.035, 0.45]
+    literal = _localize(cam, [wall, obj], LocalizationConfig(max_area_px=10**6))
+    assert literal is not None
+    assert literal.position_world[1] > 0.04  # the merged blob's centroid is pulled to the wall
+    cut = _localize(cam, [wall, obj], LocalizationConfig(edge_jump_m=0.01))
+    assert cut is not None and cut.n_proposals == 2
+    assert np.linalg.norm(cut.position_world - [0.0, 0.035, 0.14]) < 0.005

@@ -79,6 +79,11 @@ class LocalizationConfig:
     (0 disables; the sim adapter sets it from the camera mount)."""
     connectivity: int = 8
     """Pixel connectivity of the connected components (4 or 8)."""
+    edge_jump_m: float | None = None
+    """Optional, between steps 3 and 4 (not in the reference): drop mask pixels whose height
+    differs from a 3 x 3 neighbour by more than this [m] (depth edges and steep side faces), so
+    objects seen touching a bin wall in the image are not one component with it. ``None``
+    keeps the six reference steps literally."""
     height_reference: str = "world"
     """How steps 2-3 measure "above the floor": ``"depth"`` compares camera depths literally
     (floor depth = median depth; exact only for a camera looking straight down), ``"world"``
@@ -90,6 +95,10 @@ class LocalizationConfig:
     def __post_init__(self) -> None:
         _require_positive(self, "background_m", "above_floor_m", "min_area_px", "max_area_px")
         _require_non_negative(self, "min_depth_m")
+        if self.edge_jump_m is not None and not self.edge_jump_m > 0:
+            raise UsageError(
+                f"LocalizationConfig.edge_jump_m must be > 0 or None, got {self.edge_jump_m!r}"
+            )
         if self.max_area_px < self.min_area_px:
             raise UsageError(
                 f"LocalizationConfig.max_area_px ({self.max_area_px}) must be >= "

@@ -11,6 +11,10 @@ Pure numpy + OpenCV on one image, so it is testable on synthetic depth maps::
 3. object mask: ``"depth"``: ``M = valid & (D <= D_f - above_floor_m)`` (the depth difference is
    the height only for a camera looking straight down); ``"world"``:
    ``M = valid & (z_world >= z_f + above_floor_m)`` (correct for any camera tilt);
+   (optional, ``edge_jump_m``, not in the reference: remove from ``M`` the pixels whose height
+   (or depth, in "depth" mode) differs from a 3 x 3 neighbour's by more than ``edge_jump_m``:
+   ``M &= (dilate(h) - erode(h)) <= edge_jump_m``, cutting objects from walls they touch in the
+   image and leaving their flat tops);
 4. connected components of ``M`` (OpenCV), kept if ``min_area_px <= area <= max_area_px``;
 5. the component whose centroid ``(u_c, v_c)`` is nearest the image centre ``((W-1)/2, (H-1)/2)``;
 6. back-projection of the centroid's depth ``z``::
@@ -105,10 +109,15 @@ def localize_object(
     floor_z: float | None = None
     if config.height_reference == "depth":
         mask = valid & (depth <= floor_depth - config.above_floor_m)
+        height = -depth
     else:
-        z_world = pixel_heights(depth, K, cam2world)
-        floor_z = float(np.median(z_world[valid]))
-        mask = valid & (z_world >= floor_z + config.above_floor_m)
+        height = pixel_heights(depth, K, cam2world).astype(np.float32)
+        floor_z = float(np.median(height[valid]))
+        mask = valid & (height >= floor_z + config.above_floor_m)
+    if config.edge_jump_m is not None:
+        h = np.where(valid, height, np.float32(-1e3))  # invalid pixels count as a deep edge
+        kernel = np.ones((3, 3), np.uint8)
+        mask &= (cv2.dilate(h, kernel) - cv2.erode(h, kernel)) <= config.edge_jump_m
     if not mask.any():
         return None
     # 4. connected components -> proposals within the area bounds
