@@ -61,6 +61,7 @@ def write_fake_suite(directory: Path, name: str = "fake", **overrides: str) -> P
 class FakeEnv(gym.Env):
     """Deterministic in (seed, actions); latches ``reached``/``grasped`` like the real envs."""
 
+    metadata = {"render_modes": ["rgb_array"]}
     observation_space = gym.spaces.Box(-1, 1, (1, 3), np.float32)
     action_space = gym.spaces.Box(-1, 1, (1, 4), np.float32)
 

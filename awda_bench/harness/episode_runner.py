@@ -59,8 +59,13 @@ def run_episode(
     method: str,
     snapshot: str,
     on_frame: FrameHook | None = None,
+    extras: dict[str, Any] | None = None,
 ) -> EpisodeRecord:
-    """Play ``spec`` with ``policy`` on ``env`` and return its record (status ok)."""
+    """Play ``spec`` with ``policy`` on ``env`` and return its record (status ok).
+
+    ``extras`` becomes ``ctx.extras`` (the caller keeps the dict to read what the policy left there,
+    e.g. ``"demo_frames"``).
+    """
     t_start = time.perf_counter()
     seed_globals(spec.seed)
     obs, info = env.reset(seed=spec.seed, options={"task": spec.task})
@@ -68,7 +73,7 @@ def run_episode(
     if on_frame is not None:
         on_frame(env)
     t0 = time.perf_counter()
-    policy.reset(EpisodeContext(env=env.unwrapped, spec=spec))
+    policy.reset(EpisodeContext(env=env.unwrapped, spec=spec, extras={} if extras is None else extras))
     act_time = time.perf_counter() - t0
 
     success_once = False

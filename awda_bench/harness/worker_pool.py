@@ -96,7 +96,7 @@ class EpisodeExecutor:
         self._policy_key: tuple[str, str] | None = None
         self._policy: Policy | None = None
 
-    def play(self, job: Job, on_frame: FrameHook | None = None) -> EpisodeRecord:
+    def play(self, job: Job, on_frame: FrameHook | None = None, extras: dict[str, Any] | None = None) -> EpisodeRecord:
         t0 = time.perf_counter()
         try:
             key = (job.method.name, job.snapshot.sha256)
@@ -106,7 +106,7 @@ class EpisodeExecutor:
                 self._policy_key = key
             return run_episode(
                 self.env, self._policy, job.spec, self.suite,
-                method=job.method.name, snapshot=job.snapshot.sha256, on_frame=on_frame,
+                method=job.method.name, snapshot=job.snapshot.sha256, on_frame=on_frame, extras=extras,
             )  # fmt: skip
         except Exception:  # recorded with its traceback; the sweep goes on
             family = self.suite.task(job.spec.task).family
