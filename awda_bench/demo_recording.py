@@ -1,0 +1,164 @@
+"""Record a scripted demonstration: third-person frames (optional) and the per-step Trajectory.
+
+Used by ``python -m awda_bench demo`` (video + ``.npz``), by the harness (demo videos a one-shot
+policy watches) and by ground-truth waypoint extraction (state only, ``frames=False``)::
+
+    env.reset(seed, task)                  frame 0 rendered
+    for t in 0 .. T-1:                     frames at t = k, 2k, ... (render_every = k) and the last
+        record tcp_pos[t], gripper_opening_m[t], truth["grasp"][t]   (state *before* a_t)
+        a_t = expert.act(obs_t); record actions[t]; env.step(a_t)
+        stop once the expert is done (plus settle_steps) or at the suite's horizon
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from awda_bench.errors import UnknownChoiceError, UsageError
+from awda_bench.experts import EMBODIMENT_NAMES, make_expert
+from awda_bench.policies.base import EpisodeContext, EpisodeSpec
+from awda_bench.suites import Suite, load_suite
+from awda_bench.trajectory import Trajectory
+
+EMBODIMENT_UIDS: dict[str, str] = {"agent": "panda_awda", "demonstrator": "awda_demonstrator"}
+"""ManiSkill agent uid of each embodiment name."""
+
+THIRD_PERSON = "third_person"
+"""Sensor uid of the third-person camera every task declares."""
+
+SETTLE_STEPS = 5
+"""Control steps recorded after the expert is done (the released object comes to rest)."""
+
+
+def make_demo_env(suite: Suite | str, embodiment: str = "demonstrator") -> Any:
+    """The suite's env with ``embodiment``'s robot (state observations, no reward, one env).
+
+    Build it once and pass it to :func:`record_demo` for every demo: a camera's first capture
+    costs seconds (render pipeline build).
+    """
+    import awda_bench.envs  # noqa: F401  (registers the envs and robots)
+    from awda_bench.envs.embodiments import embodiment as lookup
+
+    if isinstance(suite, str):
+        suite = load_suite(suite)
+    if embodiment not in EMBODIMENT_UIDS:
+        raise UnknownChoiceError("embodiment", embodiment, EMBODIMENT_NAMES)
+    uid = EMBODIMENT_UIDS[embodiment]
+    return gym.make(
+        suite.env_id,
+        robot_uids=uid,
+        control_mode=lookup(uid).control_mode,
+        obs_mode="state",
+        reward_mode="none",
+        num_envs=1,
+        max_episode_steps=suite.horizon_steps,
+        sensor_configs={THIRD_PERSON: {"height": suite.camera.height, "width": suite.camera.width}},
+    )
+
+
+def _capture(env: Any) -> np.ndarray:
+    from awda_bench.robot.cameras import capture_rgb
+
+    return capture_rgb(env, THIRD_PERSON)[0]
+
+
+def record_demo(
+    suite: Suite | str,
+    task: int,
+    seed: int,
+    embodiment: str = "demonstrator",
+    render_every: int = 2,
+    frames: bool = True,
+    env: Any = None,
+) -> tuple[np.ndarray | None, Trajectory]:
+    """Run the scripted expert once; return ``(frames, trajectory)``.
+
+    ``frames`` is ``(F, H, W, 3)`` uint8 (steps listed in ``trajectory.meta["frame_steps"]``) or
+    None when ``frames=False``. ``env`` (from :func:`make_demo_env`, same suite and embodiment) is
+    reused when given. The episode ends ``SETTLE_STEPS`` after the expert is done, or at the horizon.
+    """
+    if isinstance(suite, str):
+        suite = load_suite(suite)
+    suite.task(task)  # unknown task -> UnknownChoiceError
+    if render_every < 1:
+        raise UsageError(f"render_every must be >= 1, got {render_every}")
+    if env is None:
+        env = make_demo_env(suite, embodiment)
+    base = env.unwrapped
+    if base.robot_uids != EMBODIMENT_UIDS.get(embodiment):
+        raise UsageError(f"env has robot {base.robot_uids!r}, not the {embodiment!r} embodiment")
+    expert = make_expert(suite.name, embodiment)
+    obs, info = env.reset(seed=seed, options={"task": task})
+    spec = EpisodeSpec(suite=suite.name, task=task, episode=0, seed=seed, demo_seed=seed)
+    expert.reset(EpisodeContext(env=base, spec=spec))
+
+    tcp, opening, actions, grasp = [], [], [], []
+    images: list[np.ndarray] = []
+    frame_steps: list[int] = []
+    settle = 0
+    for t in range(suite.horizon_steps):
+        if frames and t % render_every == 0:
+            images.append(_capture(env))
+            frame_steps.append(t)
+        tcp.append(base.agent.tcp_pose.p[0].cpu().numpy())
+        opening.append(float(base.gripper_opening_m()[0]))
+        grasp.append(bool(base.is_grasping_target()[0]))
+        action = expert.act(obs)
+        actions.append(np.asarray(action[0], dtype=np.float32))
+        obs, _, _, _, info = env.step(action)
+        if expert.done:
+            settle += 1
+            if settle > SETTLE_STEPS:
+                break
+    steps = len(actions)
+    if frames and (not frame_steps or frame_steps[-1] != steps):
+        images.append(_capture(env))
+        frame_steps.append(steps)
+
+    trajectory = Trajectory(
+        tcp_pos=np.asarray(tcp, dtype=np.float64).reshape(steps, 3),
+        gripper_opening_m=np.asarray(opening, dtype=np.float64),
+        actions=np.asarray(actions, dtype=np.float32).reshape(steps, 4),
+        truth={"grasp": np.asarray(grasp, dtype=bool)},
+        meta={
+            "suite": suite.name,
+            "task": task,
+            "seed": seed,
+            "embodiment": embodiment,
+            "robot_uid": base.robot_uids,
+            "control_freq_hz": suite.control_freq_hz,
+            "max_step_m": base.embodiment.max_step_m,
+            "steps": steps,
+            "expert_done": expert.done,
+            "success": bool(info["success"][0]),
+            "success_once": bool(info["success_once"][0]),
+            "reached": bool(info["reached"][0]),
+            "grasped": bool(info["grasped"][0]),
+            "frame_steps": frame_steps,
+        },
+    )
+    return (np.stack(images) if frames else None), trajectory
+
+
+def save_video(frames: np.ndarray, path: str | Path, fps: float) -> Path:
+    """Write RGB ``frames`` (F, H, W, 3) uint8 to an MP4 file (OpenCV, ``mp4v``)."""
+    import cv2
+
+    path = Path(path)
+    if frames.ndim != 4 or frames.shape[-1] != 3 or len(frames) == 0:
+        raise UsageError(f"frames must be (F, H, W, 3) with F >= 1, got {frames.shape}")
+    path.parent.mkdir(parents=True, exist_ok=True)
+    height, width = frames.shape[1:3]
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (width, height))
+    if not writer.isOpened():
+        raise UsageError(f"cannot open {path} for writing an MP4 video")
+    try:
+        for frame in frames:
+            writer.write(cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
+    finally:
+        writer.release()
+    return path

@@ -1,0 +1,126 @@
+"""``python -m awda_bench bench env``: task env speed with the scripted expert, and rendering cost.
+
+Prints (one env, CPU sim, state observations):
+
+- env steps/s with the expert acting (expert + ``env.step``), and ``env.step`` alone;
+- the first third-person capture (render pipeline build) and the mean cost of later captures;
+- with ``--sweep-seeds S``: expert success per task over seeds ``0 .. S-1`` (state only), a
+  per-task table, and optionally one CSV row per episode (``--sweep-csv``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import time
+from pathlib import Path
+
+import numpy as np
+
+from awda_bench.experts import EMBODIMENT_NAMES
+
+
+def add_env_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--suite", default="pick_place", help="suite name (tasks/<name>.toml)")
+    parser.add_argument("--embodiment", choices=EMBODIMENT_NAMES, default="agent")
+    parser.add_argument("--task", type=int, default=0, help="task of the speed episodes")
+    parser.add_argument("--episodes", type=int, default=3, help="expert episodes timed (state only)")
+    parser.add_argument("--frames", type=int, default=10, help="third-person captures timed after the first")
+    parser.add_argument("--sweep-seeds", type=int, default=0, help="expert success sweep: seeds per task (0: none)")
+    parser.add_argument("--sweep-tasks", default="all", help="comma-separated task indices of the sweep, or 'all'")
+    parser.add_argument("--sweep-csv", type=Path, default=None, help="write one row per sweep episode here")
+
+
+def _time_expert(env, suite, task: int, episodes: int) -> tuple[int, float, float]:
+    """Run ``episodes`` expert episodes; return (steps, total seconds, seconds inside env.step)."""
+    from awda_bench.experts import make_expert
+    from awda_bench.policies.base import EpisodeContext, EpisodeSpec
+
+    base = env.unwrapped
+    steps, total, in_step = 0, 0.0, 0.0
+    for seed in range(episodes):
+        expert = make_expert(suite.name, "agent" if base.robot_uids == "panda_awda" else "demonstrator")
+        obs, _ = env.reset(seed=seed, options={"task": task})
+        expert.reset(EpisodeContext(env=base, spec=EpisodeSpec(suite.name, task, seed, seed, seed)))
+        start = time.perf_counter()
+        for _ in range(suite.horizon_steps):
+            action = expert.act(obs)
+            t0 = time.perf_counter()
+            obs, *_ = env.step(action)
+            in_step += time.perf_counter() - t0
+            steps += 1
+            if expert.done:
+                break
+        total += time.perf_counter() - start
+    return steps, total, in_step
+
+
+def run_env_bench(args: argparse.Namespace) -> int:
+    from awda_bench.demo_recording import THIRD_PERSON, make_demo_env, record_demo
+    from awda_bench.robot.cameras import capture_rgb
+    from awda_bench.suites import load_suite
+
+    suite = load_suite(args.suite)
+    suite.task(args.task)
+    t0 = time.perf_counter()
+    env = make_demo_env(suite, args.embodiment)
+    env.reset(seed=0, options={"task": args.task})
+    print(f"env {suite.env_id} robot={env.unwrapped.robot_uids}: make + first reset {time.perf_counter() - t0:.2f} s")
+
+    steps, total, in_step = _time_expert(env, suite, args.task, args.episodes)
+    print(
+        f"expert, state only: {steps} steps in {total:.2f} s -> {steps / total:.1f} env steps/s "
+        f"(env.step alone {steps / in_step:.1f} steps/s; {args.episodes} episodes of task {args.task})"
+    )
+
+    t0 = time.perf_counter()
+    capture_rgb(env, THIRD_PERSON)
+    first = time.perf_counter() - t0
+    costs = []
+    for _ in range(args.frames):
+        env.step(np.zeros((1, 4), dtype=np.float32))
+        t0 = time.perf_counter()
+        frame = capture_rgb(env, THIRD_PERSON)
+        costs.append(time.perf_counter() - t0)
+    h, w = frame.shape[1:3]
+    print(
+        f"third-person frame {h}x{w}: first capture {first * 1000:.0f} ms, then "
+        f"{np.mean(costs) * 1000:.1f} ms mean / {np.max(costs) * 1000:.1f} ms max over {len(costs)}"
+    )
+
+    if args.sweep_seeds > 0:
+        tasks = (
+            [t.index for t in suite.tasks]
+            if args.sweep_tasks == "all"
+            else [int(x) for x in args.sweep_tasks.split(",")]
+        )
+        rows = []
+        print(f"expert sweep ({args.embodiment}): seeds 0..{args.sweep_seeds - 1} per task", flush=True)
+        print("task  success  reached  grasped  mean_steps  max_steps", flush=True)
+        for task in tasks:
+            per_task = []
+            for seed in range(args.sweep_seeds):
+                _, traj = record_demo(suite, task, seed, args.embodiment, frames=False, env=env)
+                m = traj.meta
+                row = {k: m[k] for k in ("task", "seed", "embodiment", "success", "success_once", "reached", "grasped", "steps")}
+                per_task.append(row)
+                rows.append(row)
+            n = len(per_task)
+            steps_t = [r["steps"] for r in per_task]
+            print(
+                f"{task:4d}  {sum(r['success'] for r in per_task):3d}/{n:<3d}  "
+                f"{sum(r['reached'] for r in per_task):3d}/{n:<3d}  {sum(r['grasped'] for r in per_task):3d}/{n:<3d}  "
+                f"{np.mean(steps_t):10.1f}  {max(steps_t):9d}",
+                flush=True,
+            )
+        total_success = sum(r["success"] for r in rows)
+        print(f"all   {total_success}/{len(rows)} = {total_success / len(rows):.3f}", flush=True)
+        if args.sweep_csv is not None:
+            args.sweep_csv.parent.mkdir(parents=True, exist_ok=True)
+            with args.sweep_csv.open("w", newline="") as fh:
+                writer = csv.DictWriter(fh, fieldnames=list(rows[0]))
+                writer.writeheader()
+                writer.writerows(rows)
+            print(f"wrote {args.sweep_csv}")
+    env.close()
+    return 0
