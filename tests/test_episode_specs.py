@@ -1,11 +1,11 @@
 from pathlib import Path
 
 import pytest
+from harness_fakes import write_fake_suite
 
 from awda_bench.errors import UsageError
 from awda_bench.harness.episode_specs import build_episode_specs, derive_seed, make_protocol
 from awda_bench.suites import load_suite
-from harness_fakes import write_fake_suite
 
 
 @pytest.fixture
@@ -32,7 +32,9 @@ def test_seeds_depend_only_on_identity_not_on_episode_count(suite) -> None:
     assert 0 <= a[0].seed < 2**31
 
 
-def test_fingerprint_changes_with_everything_that_defines_comparability(tmp_path: Path, suite) -> None:
+def test_fingerprint_changes_with_everything_that_defines_comparability(
+    tmp_path: Path, suite
+) -> None:
     base = make_protocol(suite, episodes=4, base_seed=0)
     assert base.fingerprint == make_protocol(suite, episodes=4, base_seed=0).fingerprint
     assert base.fingerprint == make_protocol(suite, episodes=None, base_seed=0).fingerprint

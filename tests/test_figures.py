@@ -5,8 +5,14 @@ import numpy as np
 import pandas as pd
 
 from awda_bench.harness.figures import (
-    GRASP_RGB, draw_waypoints, fig_s5, plot_success_vs_snapshot, project_points, waypoint_colours, write_mp4,
-)  # fmt: skip
+    GRASP_RGB,
+    draw_waypoints,
+    fig_s5,
+    plot_success_vs_snapshot,
+    project_points,
+    waypoint_colours,
+    write_mp4,
+)
 
 
 def test_projection_matches_a_pinhole_camera() -> None:
@@ -21,7 +27,11 @@ def test_colours_red_brighten_with_order_and_grasp_is_green() -> None:
     colours = waypoint_colours([False, False, True, False])
     assert colours[2] == GRASP_RGB
     reds = [colours[i][0] for i in (0, 1, 3)]
-    assert reds == sorted(reds) and reds[0] < reds[-1] and all(c[1] < 60 for c in (colours[0], colours[3]))
+    assert (
+        reds == sorted(reds)
+        and reds[0] < reds[-1]
+        and all(c[1] < 60 for c in (colours[0], colours[3]))
+    )
 
 
 def test_waypoints_are_drawn_where_projected_with_their_colours() -> None:
@@ -48,9 +58,14 @@ def test_mp4_round_trip(tmp_path: Path) -> None:
     frames = [np.full((48, 64, 3), i * 20, np.uint8) for i in range(10)]
     path = write_mp4(frames, tmp_path / "v" / "a.mp4", fps=10)
     cap = cv2.VideoCapture(str(path))
-    assert int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 10 and int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)) == 64
+    assert (
+        int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) == 10
+        and int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)) == 64
+    )
 
 
 def test_success_plot_is_written(tmp_path: Path) -> None:
-    table = pd.DataFrame({"ord": [0, 1, 2], "name": ["a", "b", "c"], "rate": [0.1, 0.5, 0.7], "ok": [10, 10, 10]})
+    table = pd.DataFrame(
+        {"ord": [0, 1, 2], "name": ["a", "b", "c"], "rate": [0.1, 0.5, 0.7], "ok": [10, 10, 10]}
+    )
     assert plot_success_vs_snapshot(table, "t", tmp_path / "p.png").stat().st_size > 1000

@@ -4,6 +4,7 @@ import sqlite3
 from pathlib import Path
 
 import pytest
+from harness_fakes import write_fake_suite, write_snapshots
 
 from awda_bench.errors import UsageError
 from awda_bench.harness.aggregate import family_key, mean_se
@@ -12,7 +13,6 @@ from awda_bench.harness.report import write_report
 from awda_bench.harness.results_store import STORE_NAME
 from awda_bench.harness.sweep import SweepConfig, run_sweep
 from awda_bench.harness.tables import to_latex, to_markdown
-from harness_fakes import write_fake_suite, write_snapshots
 
 FAKES = "harness_fakes"
 
@@ -26,14 +26,21 @@ def run_dir(tmp_path_factory) -> Path:
     specs = [
         MethodSpec("fake", f"{FAKES}:SkillPolicy"),
         MethodSpec("raising", f"{FAKES}:RaisingPolicy"),
-        MethodSpec("learned", f"{FAKES}:SkillPolicy", learned=True,
-                   list_snapshots=f"{FAKES}:list_snapshots", load_snapshot=f"{FAKES}:load_snapshot"),
-    ]  # fmt: skip
+        MethodSpec(
+            "learned",
+            f"{FAKES}:SkillPolicy",
+            learned=True,
+            list_snapshots=f"{FAKES}:list_snapshots",
+            load_snapshot=f"{FAKES}:load_snapshot",
+        ),
+    ]
     for spec in specs:
         register_method(spec)
     ckpt = write_snapshots(root / "ckpt", [0.1, 0.4, 0.6, 0.9])[0].parent
     out = root / "runs"
-    common = dict(suite="fake", out=out, suites_dir=suites, workers=0, progress=False, command="t", episodes=6)
+    common = dict(
+        suite="fake", out=out, suites_dir=suites, workers=0, progress=False, command="t", episodes=6
+    )
     run_sweep(SweepConfig(method="fake", **common))
     run_sweep(SweepConfig(method="raising", **common))
     run_sweep(SweepConfig(method="learned", checkpoints=ckpt, snapshots=3, **common))
@@ -43,7 +50,7 @@ def run_dir(tmp_path_factory) -> Path:
 
 
 def _recompute(store: Path, metric: str) -> dict[tuple[str, str], tuple[float, float, str, int]]:
-    """Mean ± SE per (method, group) straight from the rows, written independently of aggregate.py."""
+    """Mean ± SE per (method, group) straight from the rows, independently of aggregate.py."""
     db = sqlite3.connect(store)
     rows = db.execute(f"SELECT method, snapshot, family, status, {metric} FROM episodes").fetchall()
     planned = db.execute("SELECT method, snapshot FROM snapshots").fetchall()
@@ -54,7 +61,11 @@ def _recompute(store: Path, metric: str) -> dict[tuple[str, str], tuple[float, f
             for m, snap in planned:
                 if m != method:
                     continue
-                sel = [r for r in rows if r[0] == m and r[1] == snap and (group == "all" or r[2] == group)]
+                sel = [
+                    r
+                    for r in rows
+                    if r[0] == m and r[1] == snap and (group == "all" or r[2] == group)
+                ]
                 errors += sum(r[3] == "error" for r in sel)
                 ok = [r[4] for r in sel if r[3] == "ok"]
                 if ok:
@@ -66,12 +77,19 @@ def _recompute(store: Path, metric: str) -> dict[tuple[str, str], tuple[float, f
                 se = math.sqrt(mean * (1 - mean) / n_all)
             else:
                 se = math.sqrt(sum((r - mean) ** 2 for r in rates) / (len(rates) - 1) / len(rates))
-            out[(method, group)] = (mean, se, "binomial" if len(rates) == 1 else "snapshots", errors)
+            out[(method, group)] = (
+                mean,
+                se,
+                "binomial" if len(rates) == 1 else "snapshots",
+                errors,
+            )
     return out
 
 
 @pytest.mark.parametrize("metric", ["success_once", "success_at_end"])
-def test_summary_equals_a_recomputation_from_the_rows(run_dir: Path, tmp_path: Path, metric: str) -> None:
+def test_summary_equals_a_recomputation_from_the_rows(
+    run_dir: Path, tmp_path: Path, metric: str
+) -> None:
     write_report(run_dir, tmp_path, metric)
     summary = json.loads((tmp_path / "summary.json").read_text())
     expected = _recompute(run_dir / STORE_NAME, metric)
@@ -112,12 +130,25 @@ def test_missing_episodes_are_flagged(tmp_path: Path) -> None:
     write_fake_suite(suites)
     register_method(MethodSpec("fake", f"{FAKES}:SkillPolicy"))
     try:
-        run_sweep(SweepConfig(suite="fake", method="fake", out=tmp_path / "runs", suites_dir=suites,
-                              workers=0, progress=False, command="t", episodes=3, tasks=(3,)))  # fmt: skip
+        run_sweep(
+            SweepConfig(
+                suite="fake",
+                method="fake",
+                out=tmp_path / "runs",
+                suites_dir=suites,
+                workers=0,
+                progress=False,
+                command="t",
+                episodes=3,
+                tasks=(3,),
+            )
+        )
     finally:
         unregister_method("fake")
     result = write_report(tmp_path / "runs", tmp_path / "rep")
-    assert result.warnings == ["fake/fake: expected 6 episodes, recorded 3 (3 missing) — re-run the same command to finish"]
+    assert result.warnings == [
+        "fake/fake: expected 6 episodes, recorded 3 (3 missing) — re-run the same command to finish"
+    ]
     assert "MISMATCH" in (tmp_path / "rep" / "counts.md").read_text()
 
 
@@ -133,14 +164,22 @@ def test_mean_se_rules() -> None:
     mean, se, kind = mean_se([0.5], 5, 10)
     assert (mean, kind) == (0.5, "binomial") and se == pytest.approx(math.sqrt(0.025))
     mean, se, kind = mean_se([0.2, 0.4, 0.6], 12, 30)
-    assert (kind, mean) == ("snapshots", pytest.approx(0.4)) and se == pytest.approx(0.2 / math.sqrt(3))
+    assert (kind, mean) == ("snapshots", pytest.approx(0.4)) and se == pytest.approx(
+        0.2 / math.sqrt(3)
+    )
     assert family_key("Press Button") == family_key("press-button") == "press_button"
 
 
 def test_markdown_and_latex_renderings() -> None:
     import pandas as pd
 
-    df = pd.DataFrame({"a_b": ["0.50 ± 0.10†"], "c": [float("nan")]}, index=pd.Index(["x&y"], name="Suite"))
-    assert to_markdown(df).splitlines() == ["| Suite | a_b | c |", "|---|---:|---:|", "| x&y | 0.50 ± 0.10† | – |"]
+    df = pd.DataFrame(
+        {"a_b": ["0.50 ± 0.10†"], "c": [float("nan")]}, index=pd.Index(["x&y"], name="Suite")
+    )
+    assert to_markdown(df).splitlines() == [
+        "| Suite | a_b | c |",
+        "|---|---:|---:|",
+        "| x&y | 0.50 ± 0.10† | – |",
+    ]
     tex = to_latex(df)
     assert r"x\&y & 0.50 $\pm$ 0.10$^\dagger$ & -- \\" in tex and r"a\_b" in tex

@@ -3,6 +3,7 @@ import sqlite3
 from pathlib import Path
 
 import pytest
+from harness_fakes import write_fake_suite
 
 from awda_bench.errors import CorruptFileError, ProtocolMismatchError, UsageError
 from awda_bench.harness.episode_record import EpisodeRecord
@@ -10,20 +11,26 @@ from awda_bench.harness.episode_specs import make_protocol
 from awda_bench.harness.methods import BUILTIN_SNAPSHOT, SnapshotRef
 from awda_bench.harness.results_store import STORE_NAME, ResultsStore
 from awda_bench.suites import load_suite
-from harness_fakes import write_fake_suite
 
 SNAP = SnapshotRef(sha256=BUILTIN_SNAPSHOT, name=BUILTIN_SNAPSHOT, path=None, order=0)
 
 
 def _record(episode: int, status: str = "ok", success: bool = True) -> EpisodeRecord:
     return EpisodeRecord(
-        suite="fake", task=2, family="drawer", episode=episode, seed=episode, demo_seed=99,
-        method="m", snapshot=BUILTIN_SNAPSHOT, status=status,
+        suite="fake",
+        task=2,
+        family="drawer",
+        episode=episode,
+        seed=episode,
+        demo_seed=99,
+        method="m",
+        snapshot=BUILTIN_SNAPSHOT,
+        status=status,
         success_once=success if status == "ok" else None,
         success_at_end=success if status == "ok" else None,
         error=None if status == "ok" else "Traceback ...\nRuntimeError: boom",
         waypoints=[[0.0, 1.0, 2.0, 1.0]],
-    )  # fmt: skip
+    )
 
 
 @pytest.fixture
@@ -46,7 +53,9 @@ def test_ok_rows_are_final_and_errors_are_replaced(tmp_path: Path, protocol) -> 
         assert store.finished_keys(fp, "m", BUILTIN_SNAPSHOT) == {(2, 0)}
         store.record(fp, _record(1, success=False))  # retry of an error replaces it
         store.record(fp, _record(0, success=False))  # an ok row is never overwritten
-        rows = store.raw("SELECT episode, status, success_once, attempts FROM episodes ORDER BY episode")
+        rows = store.raw(
+            "SELECT episode, status, success_once, attempts FROM episodes ORDER BY episode"
+        )
         assert rows == [(0, "ok", 1, 1), (1, "ok", 0, 2)]
         df = store.episodes()
         assert list(df["waypoints"]) == ["[[0.0, 1.0, 2.0, 1.0]]"] * 2
@@ -55,7 +64,9 @@ def test_ok_rows_are_final_and_errors_are_replaced(tmp_path: Path, protocol) -> 
 def test_store_is_wal_and_survives_reopen(tmp_path: Path, protocol) -> None:
     with _planned(tmp_path, protocol) as store:
         store.record(protocol.fingerprint, _record(0))
-    assert sqlite3.connect(tmp_path / STORE_NAME).execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    assert (
+        sqlite3.connect(tmp_path / STORE_NAME).execute("PRAGMA journal_mode").fetchone()[0] == "wal"
+    )
     with ResultsStore(tmp_path, create=False) as store:
         assert len(store.episodes()) == 1
         assert store.snapshots()["episodes_expected"].tolist() == [8]
@@ -67,7 +78,10 @@ def test_other_protocol_is_refused_without_touching_the_file(tmp_path: Path, pro
     before = hashlib.sha256((tmp_path / STORE_NAME).read_bytes()).hexdigest()
     suite = load_suite("fake", tmp_path)
     other = make_protocol(suite, episodes=5, base_seed=0)
-    with ResultsStore(tmp_path, create=True) as store, pytest.raises(ProtocolMismatchError, match="episodes=4->5"):
+    with (
+        ResultsStore(tmp_path, create=True) as store,
+        pytest.raises(ProtocolMismatchError, match="episodes=4->5"),
+    ):
         store.plan(other, "m", False, [SNAP], 10, "test", {})
     assert hashlib.sha256((tmp_path / STORE_NAME).read_bytes()).hexdigest() == before
 

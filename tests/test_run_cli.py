@@ -8,11 +8,11 @@ import time
 from pathlib import Path
 
 import pytest
+from harness_fakes import write_fake_suite, write_snapshots
 
 from awda_bench.cli import main
 from awda_bench.harness.methods import MethodSpec, register_method, unregister_method
 from awda_bench.harness.results_store import STORE_NAME
-from harness_fakes import write_fake_suite, write_snapshots
 
 TESTS = Path(__file__).resolve().parent
 FAKES = "harness_fakes"
@@ -28,14 +28,32 @@ def suites(tmp_path: Path) -> Path:
 
 @pytest.fixture
 def learned():
-    register_method(MethodSpec("learned", f"{FAKES}:SkillPolicy", learned=True,
-                               list_snapshots=f"{FAKES}:list_snapshots", load_snapshot=f"{FAKES}:load_snapshot"))  # fmt: skip
+    register_method(
+        MethodSpec(
+            "learned",
+            f"{FAKES}:SkillPolicy",
+            learned=True,
+            list_snapshots=f"{FAKES}:list_snapshots",
+            load_snapshot=f"{FAKES}:load_snapshot",
+        )
+    )
     yield
     unregister_method("learned")
 
 
 def _run(suites: Path, out: Path, *extra: str) -> int:
-    argv = ["run", "--suite", "fake", "--tasks-dir", str(suites), "--out", str(out), "--no-progress", "--workers", "0"]
+    argv = [
+        "run",
+        "--suite",
+        "fake",
+        "--tasks-dir",
+        str(suites),
+        "--out",
+        str(out),
+        "--no-progress",
+        "--workers",
+        "0",
+    ]
     return main([*argv, *extra])
 
 
@@ -51,7 +69,10 @@ def test_run_then_report_end_to_end(tmp_path: Path, suites: Path, capsys) -> Non
 
 
 def test_errors_make_exit_code_1_and_are_kept(tmp_path: Path, suites: Path, capsys) -> None:
-    assert _run(suites, tmp_path / "runs", "--method", f"{FAKES}:RaisingPolicy", "--episodes", "2") == 1
+    assert (
+        _run(suites, tmp_path / "runs", "--method", f"{FAKES}:RaisingPolicy", "--episodes", "2")
+        == 1
+    )
     assert "2 episodes ended in errors" in capsys.readouterr().err
 
 
@@ -59,7 +80,9 @@ def _digest(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
 
 
-def test_bad_input_is_one_line_exit_2_and_leaves_the_store_alone(tmp_path: Path, suites: Path, learned, capsys) -> None:
+def test_bad_input_is_one_line_exit_2_and_leaves_the_store_alone(
+    tmp_path: Path, suites: Path, learned, capsys
+) -> None:
     out = tmp_path / "runs"
     assert _run(suites, out, "--method", f"{FAKES}:SkillPolicy", "--episodes", "2") == 0
     before = _digest(out / STORE_NAME)
@@ -75,12 +98,25 @@ def test_bad_input_is_one_line_exit_2_and_leaves_the_store_alone(tmp_path: Path,
         (["--method", "learned"], "pass --checkpoints DIR"),
         (["--method", "learned", "--checkpoints", str(empty)], "holds no snapshots"),
         (["--method", "learned", "--checkpoints", str(tmp_path / "missing")], "does not exist"),
-        (["--method", "learned", "--checkpoints", str(corrupt.parent)], "step_20000.json is not valid JSON"),
+        (
+            ["--method", "learned", "--checkpoints", str(corrupt.parent)],
+            "step_20000.json is not valid JSON",
+        ),
         (["--method", f"{FAKES}:SkillPolicy", "--episodes", "3"], "under protocol"),
         (["--method", f"{FAKES}:SkillPolicy", "--seed", "1", "--episodes", "2"], "base_seed=0->1"),
     ]
     for extra, message in cases:
-        argv = ["run", "--suite", "fake", "--tasks-dir", str(suites), "--out", str(out), "--no-progress", *extra]
+        argv = [
+            "run",
+            "--suite",
+            "fake",
+            "--tasks-dir",
+            str(suites),
+            "--out",
+            str(out),
+            "--no-progress",
+            *extra,
+        ]
         if "--suite" in extra:
             argv = argv[:1] + argv[3:]
         assert main(argv) == 2, extra
@@ -93,7 +129,8 @@ def test_bad_input_is_one_line_exit_2_and_leaves_the_store_alone(tmp_path: Path,
 def _outcomes(out: Path) -> list[tuple]:
     db = sqlite3.connect(out / STORE_NAME)
     return db.execute(
-        "SELECT task, episode, seed, status, success_once, success_at_end, steps FROM episodes ORDER BY task, episode"
+        "SELECT task, episode, seed, status, success_once, success_at_end, steps FROM episodes "
+        "ORDER BY task, episode"
     ).fetchall()
 
 
@@ -107,10 +144,28 @@ def _recorded(store: Path) -> int:
 
 
 @pytest.mark.slow
-def test_sigkill_mid_sweep_then_resume_equals_an_uninterrupted_run(tmp_path: Path, suites: Path) -> None:
-    args = ["--suite", "fake", "--tasks-dir", str(suites), "--method", f"{FAKES}:SlowPolicy",
-            "--episodes", "8", "--workers", "2", "--no-progress"]  # fmt: skip
-    env = {**os.environ, "PYTHONPATH": str(TESTS), "AWDA_FAKE_SLEEP_S": "0.1", "OMP_NUM_THREADS": "1"}
+def test_sigkill_mid_sweep_then_resume_equals_an_uninterrupted_run(
+    tmp_path: Path, suites: Path
+) -> None:
+    args = [
+        "--suite",
+        "fake",
+        "--tasks-dir",
+        str(suites),
+        "--method",
+        f"{FAKES}:SlowPolicy",
+        "--episodes",
+        "8",
+        "--workers",
+        "2",
+        "--no-progress",
+    ]
+    env = {
+        **os.environ,
+        "PYTHONPATH": str(TESTS),
+        "AWDA_FAKE_SLEEP_S": "0.1",
+        "OMP_NUM_THREADS": "1",
+    }
     killed = tmp_path / "killed"
     command = [sys.executable, "-m", "awda_bench", "run", *args, "--out", str(killed)]
     proc = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -128,12 +183,35 @@ def test_sigkill_mid_sweep_then_resume_equals_an_uninterrupted_run(tmp_path: Pat
     assert 4 <= partial < 16
     assert subprocess.run(command, env=env, timeout=300).returncode == 0
     whole = tmp_path / "whole"
-    assert subprocess.run([sys.executable, "-m", "awda_bench", "run", *args, "--workers", "1", "--out", str(whole)],
-                          env=env, timeout=300).returncode == 0  # fmt: skip
+    assert (
+        subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "awda_bench",
+                "run",
+                *args,
+                "--workers",
+                "1",
+                "--out",
+                str(whole),
+            ],
+            env=env,
+            timeout=300,
+        ).returncode
+        == 0
+    )
     assert _outcomes(killed) == _outcomes(whole) and len(_outcomes(whole)) == 16
     db = sqlite3.connect(killed / STORE_NAME)
-    assert db.execute("SELECT COUNT(*), COUNT(DISTINCT task || '/' || episode) FROM episodes").fetchone() == (16, 16)
+    assert db.execute(
+        "SELECT COUNT(*), COUNT(DISTINCT task || '/' || episode) FROM episodes"
+    ).fetchone() == (16, 16)
     for name in ("killed", "whole"):
-        assert main(["report", "--runs", str(tmp_path / name), "--out", str(tmp_path / f"rep-{name}")]) == 0
-    assert (tmp_path / "rep-killed" / "s3.md").read_text() == (tmp_path / "rep-whole" / "s3.md").read_text()
+        assert (
+            main(["report", "--runs", str(tmp_path / name), "--out", str(tmp_path / f"rep-{name}")])
+            == 0
+        )
+    assert (tmp_path / "rep-killed" / "s3.md").read_text() == (
+        tmp_path / "rep-whole" / "s3.md"
+    ).read_text()
     assert "⚠ WARNINGS" not in (tmp_path / "rep-killed" / "report.md").read_text()

@@ -2,13 +2,13 @@ import hashlib
 from pathlib import Path
 
 import pytest
+from harness_fakes import write_fake_suite, write_snapshots
 
 from awda_bench.errors import CorruptFileError, UsageError
 from awda_bench.harness.methods import MethodSpec, register_method, unregister_method
 from awda_bench.harness.results_store import STORE_NAME, ResultsStore
 from awda_bench.harness.sweep import SweepConfig, run_sweep
 from awda_bench.harness.worker_pool import WorkerStartError
-from harness_fakes import write_fake_suite, write_snapshots
 
 FAKES = "harness_fakes"
 METHODS = {
@@ -17,10 +17,13 @@ METHODS = {
     "hanging": MethodSpec("hanging", f"{FAKES}:HangingPolicy"),
     "crashing": MethodSpec("crashing", f"{FAKES}:CrashingPolicy"),
     "learned": MethodSpec(
-        "learned", f"{FAKES}:SkillPolicy", learned=True,
-        list_snapshots=f"{FAKES}:list_snapshots", load_snapshot=f"{FAKES}:load_snapshot",
+        "learned",
+        f"{FAKES}:SkillPolicy",
+        learned=True,
+        list_snapshots=f"{FAKES}:list_snapshots",
+        load_snapshot=f"{FAKES}:load_snapshot",
     ),
-}  # fmt: skip
+}
 
 
 @pytest.fixture(autouse=True)
@@ -43,7 +46,9 @@ def suites(tmp_path: Path) -> Path:
 def _config(suites: Path, out: Path, **kw) -> SweepConfig:
     kw.setdefault("method", "fake")
     kw.setdefault("workers", 0)
-    return SweepConfig(suite="fake", out=out, suites_dir=suites, progress=False, command="test", **kw)
+    return SweepConfig(
+        suite="fake", out=out, suites_dir=suites, progress=False, command="test", **kw
+    )
 
 
 def _outcomes(out: Path) -> list[tuple]:
@@ -54,7 +59,9 @@ def _outcomes(out: Path) -> list[tuple]:
         )
 
 
-def test_inline_sweep_records_every_episode_then_resume_skips_them(tmp_path: Path, suites: Path) -> None:
+def test_inline_sweep_records_every_episode_then_resume_skips_them(
+    tmp_path: Path, suites: Path
+) -> None:
     out = tmp_path / "run"
     first = run_sweep(_config(suites, out, episodes=5))
     assert (first.planned, first.skipped, first.ran, first.errors) == (10, 0, 10, 0)
@@ -75,12 +82,16 @@ def test_worker_count_does_not_change_outcomes(tmp_path: Path, suites: Path) -> 
     assert _outcomes(tmp_path / "w0") == _outcomes(tmp_path / "w1") == _outcomes(tmp_path / "w2")
 
 
-def test_raising_episode_is_an_error_with_traceback_and_sweep_goes_on(tmp_path: Path, suites: Path) -> None:
+def test_raising_episode_is_an_error_with_traceback_and_sweep_goes_on(
+    tmp_path: Path, suites: Path
+) -> None:
     out = tmp_path / "run"
     result = run_sweep(_config(suites, out, method="raising", episodes=3, workers=1))
     assert (result.ran, result.errors) == (6, 2)
     with ResultsStore(out, create=False) as store:
-        errors = store.raw("SELECT task, episode, error, success_once FROM episodes WHERE status='error'")
+        errors = store.raw(
+            "SELECT task, episode, error, success_once FROM episodes WHERE status='error'"
+        )
     assert [(t, e) for t, e, _, _ in errors] == [(2, 1), (3, 1)]
     assert all("Traceback" in msg and "RuntimeError: boom in act" in msg for _, _, msg, _ in errors)
     assert all(s is None for *_, s in errors)
@@ -93,7 +104,11 @@ def test_raising_episode_is_an_error_with_traceback_and_sweep_goes_on(tmp_path: 
 @pytest.mark.slow
 def test_watchdog_kills_a_hung_episode_and_respawns(tmp_path: Path, suites: Path) -> None:
     out = tmp_path / "run"
-    result = run_sweep(_config(suites, out, method="hanging", episodes=3, workers=2, tasks=(2,), episode_timeout_s=3.0))
+    result = run_sweep(
+        _config(
+            suites, out, method="hanging", episodes=3, workers=2, tasks=(2,), episode_timeout_s=3.0
+        )
+    )
     assert (result.ran, result.errors, result.respawns) == (3, 1, 1)
     with ResultsStore(out, create=False) as store:
         (msg,) = store.raw("SELECT error FROM episodes WHERE status='error'")[0]
@@ -101,7 +116,9 @@ def test_watchdog_kills_a_hung_episode_and_respawns(tmp_path: Path, suites: Path
 
 
 def test_a_crashed_worker_is_recorded_and_replaced(tmp_path: Path, suites: Path) -> None:
-    result = run_sweep(_config(suites, tmp_path / "run", method="crashing", episodes=3, workers=1, tasks=(3,)))
+    result = run_sweep(
+        _config(suites, tmp_path / "run", method="crashing", episodes=3, workers=1, tasks=(3,))
+    )
     assert (result.ran, result.errors, result.respawns) == (3, 1, 1)
     with ResultsStore(tmp_path / "run", create=False) as store:
         (msg,) = store.raw("SELECT error FROM episodes WHERE status='error'")[0]
@@ -152,7 +169,15 @@ def test_bad_input_is_refused_before_the_store_is_touched(tmp_path: Path, suites
 
 def test_a_worker_that_cannot_build_its_env_stops_the_sweep(tmp_path: Path, suites: Path) -> None:
     write_fake_suite(suites, name="broken", env_id='"harness_fakes:AWDA-Missing-v0"')
-    config = SweepConfig(suite="broken", method="fake", out=tmp_path / "run", suites_dir=suites,
-                         workers=1, episodes=1, progress=False, command="test")  # fmt: skip
+    config = SweepConfig(
+        suite="broken",
+        method="fake",
+        out=tmp_path / "run",
+        suites_dir=suites,
+        workers=1,
+        episodes=1,
+        progress=False,
+        command="test",
+    )
     with pytest.raises(WorkerStartError, match="could not build the env"):
         run_sweep(config)

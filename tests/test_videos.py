@@ -1,23 +1,37 @@
 from pathlib import Path
 
 import cv2
+from harness_fakes import write_fake_suite
 
 from awda_bench.harness.sweep import SweepConfig, run_sweep
 from awda_bench.harness.videos import choose_episodes, record_videos
-from harness_fakes import write_fake_suite
 
 
 def test_choose_first_k_successes_and_failures_per_task() -> None:
     rows = [(2, 0, 1), (2, 1, 0), (2, 2, 1), (2, 3, 1), (3, 0, 0), (3, 1, 0)]
-    assert choose_episodes(rows, 2) == [(2, 0, True), (2, 2, True), (2, 1, False), (3, 0, False), (3, 1, False)]
+    assert choose_episodes(rows, 2) == [
+        (2, 0, True),
+        (2, 2, True),
+        (2, 1, False),
+        (3, 0, False),
+        (3, 1, False),
+    ]
 
 
 def test_videos_replay_the_recorded_episodes(tmp_path: Path) -> None:
     suites = tmp_path / "tasks"
     suites.mkdir()
     write_fake_suite(suites)
-    config = SweepConfig(suite="fake", method="harness_fakes:SkillPolicy", out=tmp_path / "runs",
-                         suites_dir=suites, workers=0, progress=False, episodes=4, command="t")  # fmt: skip
+    config = SweepConfig(
+        suite="fake",
+        method="harness_fakes:SkillPolicy",
+        out=tmp_path / "runs",
+        suites_dir=suites,
+        workers=0,
+        progress=False,
+        episodes=4,
+        command="t",
+    )
     run_sweep(config)
     files = record_videos(config, 1)
     videos = sorted(p.name for p in files if p.suffix == ".mp4")

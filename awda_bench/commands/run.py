@@ -24,22 +24,68 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser = subparsers.add_parser(
         "run",
         help="evaluate a method on a suite (resumable; results in RUN_DIR/results.sqlite)",
-        description="Play every episode of the suite's evaluation protocol with a method and record one "
+        description="Play every episode of the suite's evaluation protocol with a method and "
+        "record one "
         "row per episode. Re-running the same command skips finished episodes and retries errors. "
-        "Exit 1 if episodes of this invocation ended in errors (they are stored and retried next time).",
+        "Exit 1 if episodes of this invocation ended in errors (they are stored and retried next "
+        "time).",
     )
-    parser.add_argument("--suite", required=True, help=f"suite name ({', '.join(available_suites()) or 'see tasks/'})")
-    parser.add_argument("--method", default=DEFAULT_METHOD, help=f"method ({', '.join(method_names())}); default {DEFAULT_METHOD}")
+    parser.add_argument(
+        "--suite",
+        required=True,
+        help=f"suite name ({', '.join(available_suites()) or 'see tasks/'})",
+    )
+    parser.add_argument(
+        "--method",
+        default=DEFAULT_METHOD,
+        help=f"method ({', '.join(method_names())}); default {DEFAULT_METHOD}",
+    )
     parser.add_argument("--checkpoints", type=Path, help="snapshot directory of a learned method")
-    parser.add_argument("--snapshots", type=int, default=10, help="evaluate the last N snapshots (default 10)")
-    parser.add_argument("--episodes", type=int, help="episodes per held-out task (or family); default: the suite's (paper: 20)")
-    parser.add_argument("--seed", type=int, default=0, help="base seed of all episode seeds (default 0)")
-    parser.add_argument("--workers", type=int, default=DEFAULT_WORKERS, help=f"worker processes, 0 = in this process (default {DEFAULT_WORKERS})")
-    parser.add_argument("--out", type=Path, default=Path("runs"), help="run directory (default runs/)")
-    parser.add_argument("--quick", action="store_true", help=f"small sweep: {QUICK_EPISODES} episodes per task, last snapshot only")
-    parser.add_argument("--task", type=int, action="append", default=[], help="only these evaluated tasks (repeatable)")
-    parser.add_argument("--episode-timeout", type=float, default=600.0, help="watchdog limit per episode [s] (default 600)")
-    parser.add_argument("--videos", type=int, default=0, metavar="K", help="save K successful and K failed episodes per task as MP4")
+    parser.add_argument(
+        "--snapshots", type=int, default=10, help="evaluate the last N snapshots (default 10)"
+    )
+    parser.add_argument(
+        "--episodes",
+        type=int,
+        help="episodes per held-out task (or family); default: the suite's (paper: 20)",
+    )
+    parser.add_argument(
+        "--seed", type=int, default=0, help="base seed of all episode seeds (default 0)"
+    )
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=DEFAULT_WORKERS,
+        help=f"worker processes, 0 = in this process (default {DEFAULT_WORKERS})",
+    )
+    parser.add_argument(
+        "--out", type=Path, default=Path("runs"), help="run directory (default runs/)"
+    )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"small sweep: {QUICK_EPISODES} episodes per task, last snapshot only",
+    )
+    parser.add_argument(
+        "--task",
+        type=int,
+        action="append",
+        default=[],
+        help="only these evaluated tasks (repeatable)",
+    )
+    parser.add_argument(
+        "--episode-timeout",
+        type=float,
+        default=600.0,
+        help="watchdog limit per episode [s] (default 600)",
+    )
+    parser.add_argument(
+        "--videos",
+        type=int,
+        default=0,
+        metavar="K",
+        help="save K successful and K failed episodes per task as MP4",
+    )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--tasks-dir", type=Path, default=SUITES_DIR, help=argparse.SUPPRESS)
     parser.add_argument("--env-factory", default=DEFAULT_ENV_FACTORY, help=argparse.SUPPRESS)
@@ -70,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     result = run_sweep(config)
     print(
-        f"{config.suite}/{config.method}: {result.planned} episodes planned, {result.skipped} already done, "
+        f"{config.suite}/{config.method}: {result.planned} episodes planned, "
+        f"{result.skipped} already done, "
         f"{result.ran} played ({result.errors} errors) in {result.wall_time_s:.1f} s; "
         f"store {config.out / STORE_NAME}"
     )
@@ -80,6 +127,10 @@ def run(args: argparse.Namespace) -> int:
         written = record_videos(config, args.videos)
         print(f"videos: {len(written)} files under {config.out / 'videos'}")
     if result.errors:
-        print(f"warning: {result.errors} episodes ended in errors; re-run the same command to retry them", file=sys.stderr)
+        print(
+            f"warning: {result.errors} episodes ended in errors; "
+            "re-run the same command to retry them",
+            file=sys.stderr,
+        )
         return 1
     return 0

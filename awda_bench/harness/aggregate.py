@@ -23,9 +23,13 @@ DEFAULT_METRIC = "success_once"
 """``info["success"]`` at any step (the reference evaluations stop at the first success)."""
 
 S4_FAMILIES = (
-    ("door", "Door"), ("drawer", "Drawer"), ("press_button", "Press Button"),
-    ("stack_block", "Stack Block"), ("basketball", "Basketball"), ("nut_assembly", "Nut Assembly"),
-)  # fmt: skip
+    ("door", "Door"),
+    ("drawer", "Drawer"),
+    ("press_button", "Press Button"),
+    ("stack_block", "Stack Block"),
+    ("basketball", "Basketball"),
+    ("nut_assembly", "Nut Assembly"),
+)
 """Table S4's family ids (as in suite files) and column titles, in the paper's order."""
 
 ALL = "all"
@@ -82,15 +86,21 @@ def per_snapshot(episodes: pd.DataFrame, snapshots: pd.DataFrame, metric: str) -
         }
     )
     plan = snapshots.set_index(keys)[["name", "ord", "learned", "episodes_expected"]]
-    table = plan.join(counts, how="left").fillna({"ok": 0, "successes": 0, "errors": 0}).reset_index()
+    table = (
+        plan.join(counts, how="left").fillna({"ok": 0, "successes": 0, "errors": 0}).reset_index()
+    )
     for column in ("ok", "successes", "errors"):
         table[column] = table[column].astype(int)
     table["recorded"] = table["ok"] + table["errors"]
-    table["rate"] = [s / n if n else math.nan for s, n in zip(table["successes"], table["ok"], strict=True)]
+    table["rate"] = [
+        s / n if n else math.nan for s, n in zip(table["successes"], table["ok"], strict=True)
+    ]
     return table
 
 
-def mean_se(rates: list[float], successes: int, episodes: int) -> tuple[float | None, float | None, str]:
+def mean_se(
+    rates: list[float], successes: int, episodes: int
+) -> tuple[float | None, float | None, str]:
     """Mean over snapshot rates and its SE (see the module docstring)."""
     if not rates:
         return None, None, "none"
@@ -117,13 +127,24 @@ def make_cell(
             total_n += len(snap_rows)
     mean, se, kind = mean_se(rates, total_s, total_n)
     return Cell(
-        suite=suite, group=group, method=method, metric=metric, snapshots=len(rates),
-        snapshots_planned=len(plan), episodes=total_n, successes=total_s,
-        errors=int((rows["status"] == "error").sum()), mean=mean, se=se, se_kind=kind,
-    )  # fmt: skip
+        suite=suite,
+        group=group,
+        method=method,
+        metric=metric,
+        snapshots=len(rates),
+        snapshots_planned=len(plan),
+        episodes=total_n,
+        successes=total_s,
+        errors=int((rows["status"] == "error").sum()),
+        mean=mean,
+        se=se,
+        se_kind=kind,
+    )
 
 
-def all_cells(episodes: pd.DataFrame, snapshots: pd.DataFrame, protocols: pd.DataFrame, metric: str) -> list[Cell]:
+def all_cells(
+    episodes: pd.DataFrame, snapshots: pd.DataFrame, protocols: pd.DataFrame, metric: str
+) -> list[Cell]:
     """Every cell: per (suite, method) the whole suite, and each family of the suite."""
     if metric not in METRICS:
         raise ValueError(f"metric must be one of {METRICS}")
@@ -143,7 +164,14 @@ def all_cells(episodes: pd.DataFrame, snapshots: pd.DataFrame, protocols: pd.Dat
                     cells.append(make_cell(rows[keyed == family], plan, group=family, **common))
             s4 = [k for k, _ in S4_FAMILIES if k in families]
             if s4 and set(s4) != set(families):
-                cells.append(make_cell(rows[rows["family"].map(family_key).isin(s4)], plan, group="s4_all", **common))
+                cells.append(
+                    make_cell(
+                        rows[rows["family"].map(family_key).isin(s4)],
+                        plan,
+                        group="s4_all",
+                        **common,
+                    )
+                )
     return cells
 
 
@@ -161,4 +189,6 @@ def grasp_analysis(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
             row[column] = float(known.mean()) if len(known) == len(g) and len(g) else None
         row["success"] = float(g[metric].mean())
         out.append(row)
-    return pd.DataFrame(out, columns=["suite", "method", "episodes", "reached", "grasped", "success"])
+    return pd.DataFrame(
+        out, columns=["suite", "method", "episodes", "reached", "grasped", "success"]
+    )

@@ -38,7 +38,7 @@ class EpisodeRecord:
     success_at_end: bool | None = None
     """``info["success"]`` was true at the last step played."""
     reached: bool | None = None
-    """End-effector came within reach of the target before any grasp (``None``: env does not say)."""
+    """End-effector came within reach of the target before any grasp (``None``: not reported)."""
     grasped: bool | None = None
     """Reached, then lifted the target (``None``: env does not say)."""
     steps: int = 0

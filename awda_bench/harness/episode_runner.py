@@ -42,7 +42,7 @@ def info_flag(info: dict[str, Any], key: str) -> bool | None:
 def seed_globals(seed: int) -> None:
     """Seed Python's, NumPy's and (if loaded) torch's global generators for one episode."""
     random.seed(seed)
-    np.random.seed(seed)
+    np.random.seed(seed)  # noqa: NPY002 (policies may use the legacy global generator)
     import sys
 
     torch = sys.modules.get("torch")
@@ -73,7 +73,9 @@ def run_episode(
     if on_frame is not None:
         on_frame(env)
     t0 = time.perf_counter()
-    policy.reset(EpisodeContext(env=env.unwrapped, spec=spec, extras={} if extras is None else extras))
+    policy.reset(
+        EpisodeContext(env=env.unwrapped, spec=spec, extras={} if extras is None else extras)
+    )
     act_time = time.perf_counter() - t0
 
     success_once = False

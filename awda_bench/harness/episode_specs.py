@@ -66,7 +66,9 @@ def make_protocol(suite: Suite, *, episodes: int | None, base_seed: int) -> Eval
         raise UsageError(f"--seed must be non-negative (got {base_seed})")
     unit = suite.episode_unit
     if unit not in EPISODE_UNITS:
-        raise UsageError(f"suite {suite.name!r}: episode_unit {unit!r} is not one of {EPISODE_UNITS}")
+        raise UsageError(
+            f"suite {suite.name!r}: episode_unit {unit!r} is not one of {EPISODE_UNITS}"
+        )
     return EvalProtocol(
         suite=suite.name,
         suite_sha256=hashlib.sha256(suite.path.read_bytes()).hexdigest(),

@@ -26,7 +26,9 @@ RED_BRIGHT_RGB = (255, 40, 40)
 """Colour of the last free-space waypoint."""
 
 
-def project_points(points_world: np.ndarray, intrinsic_cv: np.ndarray, extrinsic_cv: np.ndarray) -> np.ndarray:
+def project_points(
+    points_world: np.ndarray, intrinsic_cv: np.ndarray, extrinsic_cv: np.ndarray
+) -> np.ndarray:
     """Pixel coordinates ``(N, 2)`` (u right, v down) of world points ``(N, 3)`` [m].
 
     ``extrinsic_cv`` is the 3x4 (or 4x4) world->camera transform in OpenCV convention (z forward),
@@ -51,18 +53,27 @@ def waypoint_colours(grasp: Sequence[bool]) -> list[tuple[int, int, int]]:
             colours.append(GRASP_RGB)
             continue
         t = free.index(i) / max(1, len(free) - 1)
-        colours.append(tuple(int(round(a + t * (b - a))) for a, b in zip(RED_DIM_RGB, RED_BRIGHT_RGB, strict=True)))
+        r, g_, b = (
+            round(lo + t * (hi - lo)) for lo, hi in zip(RED_DIM_RGB, RED_BRIGHT_RGB, strict=True)
+        )
+        colours.append((r, g_, b))
     return colours
 
 
-def draw_waypoints(frame: np.ndarray, pixels: np.ndarray, grasp: Sequence[bool], radius_px: int = 5) -> np.ndarray:
+def draw_waypoints(
+    frame: np.ndarray, pixels: np.ndarray, grasp: Sequence[bool], radius_px: int = 5
+) -> np.ndarray:
     """A copy of ``frame`` with the waypoints (``(K, 2)`` pixels) drawn in order."""
     out = np.ascontiguousarray(frame, dtype=np.uint8).copy()
     colours = waypoint_colours(grasp)
-    pts = [None if np.isnan(p).any() else (int(round(p[0])), int(round(p[1]))) for p in np.asarray(pixels, float)]
+    pts = [
+        None if np.isnan(p).any() else (int(round(p[0])), int(round(p[1])))
+        for p in np.asarray(pixels, float)
+    ]
     for k in range(1, len(pts)):
-        if pts[k - 1] is not None and pts[k] is not None:
-            cv2.line(out, pts[k - 1], pts[k], colours[k], 2, cv2.LINE_AA)
+        start, end = pts[k - 1], pts[k]
+        if start is not None and end is not None:
+            cv2.line(out, start, end, colours[k], 2, cv2.LINE_AA)
     for p, colour in zip(pts, colours, strict=True):
         if p is not None:
             cv2.circle(out, p, radius_px, colour, -1, cv2.LINE_AA)
@@ -75,7 +86,12 @@ def _fit_height(frame: np.ndarray, height: int) -> np.ndarray:
     return cv2.resize(frame, (max(1, round(w * height / h)), height), interpolation=cv2.INTER_AREA)
 
 
-def fig_s5(demo_frames: Sequence[np.ndarray], agent_frame: np.ndarray, pixels: np.ndarray, grasp: Sequence[bool]) -> np.ndarray:
+def fig_s5(
+    demo_frames: Sequence[np.ndarray],
+    agent_frame: np.ndarray,
+    pixels: np.ndarray,
+    grasp: Sequence[bool],
+) -> np.ndarray:
     """Demo frames in a row (scaled to half the agent frame's height, wrapped), then the agent's
     first frame with the waypoints drawn; returns one RGB image."""
     agent = draw_waypoints(agent_frame, pixels, grasp)
@@ -92,8 +108,19 @@ def fig_s5(demo_frames: Sequence[np.ndarray], agent_frame: np.ndarray, pixels: n
         demo[i * (h // 2) : i * (h // 2) + r.shape[0], : r.shape[1]] = r
     gap = np.full((h, 8, 3), 255, np.uint8)
     image = np.concatenate([demo, gap, agent], axis=1)
-    cv2.putText(image, "demo", (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 0), 1, cv2.LINE_AA)
-    cv2.putText(image, "agent + waypoints", (demo_w + 12, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 0), 1, cv2.LINE_AA)
+    cv2.putText(
+        image, "demo", (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 0), 1, cv2.LINE_AA
+    )
+    cv2.putText(
+        image,
+        "agent + waypoints",
+        (demo_w + 12, 14),
+        cv2.FONT_HERSHEY_SIMPLEX,
+        0.45,
+        (255, 255, 0),
+        1,
+        cv2.LINE_AA,
+    )
     return image
 
 
@@ -110,7 +137,7 @@ def write_mp4(frames: Sequence[np.ndarray], path: Path, fps: float) -> Path:
         raise ValueError("no frames to write")
     path.parent.mkdir(parents=True, exist_ok=True)
     h, w = frames[0].shape[:2]
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (w, h))
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"mp4v"), fps, (w, h))
     if not writer.isOpened():
         raise OSError(f"OpenCV could not open a video writer for {path}")
     try:
@@ -122,7 +149,7 @@ def write_mp4(frames: Sequence[np.ndarray], path: Path, fps: float) -> Path:
 
 
 def plot_success_vs_snapshot(table: pd.DataFrame, title: str, path: Path) -> Path:
-    """Success rate per snapshot (x: snapshot order, labelled by file name) with binomial SE bars."""
+    """Success rate per snapshot (x: training order, labelled by file) with binomial SE bars."""
     fig, ax = plt.subplots(figsize=(6, 3.5))
     n = table["ok"].clip(lower=1)
     se = np.sqrt(table["rate"] * (1 - table["rate"]) / n)

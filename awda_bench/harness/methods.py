@@ -144,9 +144,12 @@ def select_snapshots(spec: MethodSpec, checkpoints: Path | None, last_n: int) ->
             raise
         except Exception as exc:  # any failure to load is a corrupt snapshot, reported as such
             raise CorruptFileError(
-                f"snapshot {path} cannot be loaded ({type(exc).__name__}: {exc}); remove or replace it"
+                f"snapshot {path} cannot be loaded ({type(exc).__name__}: {exc}); "
+                "remove or replace it"
             ) from exc
-        refs.append(SnapshotRef(sha256=file_sha256(path), name=path.name, path=str(path), order=order))
+        refs.append(
+            SnapshotRef(sha256=file_sha256(path), name=path.name, path=str(path), order=order)
+        )
     hashes = [r.sha256 for r in refs]
     if len(set(hashes)) != len(hashes):
         raise UsageError(f"checkpoint directory {checkpoints} holds identical snapshot files")

@@ -52,28 +52,69 @@ def count_table(per_snap: pd.DataFrame, protocols: pd.DataFrame) -> pd.DataFrame
     suites = protocols.set_index("fingerprint")["suite"]
     rows = []
     for (proto, method), g in per_snap.groupby(["protocol", "method"], sort=True):
-        expected, ok, err = int(g["episodes_expected"].sum()), int(g["ok"].sum()), int(g["errors"].sum())
+        expected, ok, err = (
+            int(g["episodes_expected"].sum()),
+            int(g["ok"].sum()),
+            int(g["errors"].sum()),
+        )
         missing = expected - ok - err
         check = "OK" if missing == 0 and err == 0 else "MISMATCH" if missing else "ERRORS"
-        rows.append({"suite": suites[proto], "method": method, "protocol": proto, "snapshots": len(g),
-                     "expected": expected, "ok": ok, "errors": err, "missing": missing, "check": check})  # fmt: skip
+        rows.append(
+            {
+                "suite": suites[proto],
+                "method": method,
+                "protocol": proto,
+                "snapshots": len(g),
+                "expected": expected,
+                "ok": ok,
+                "errors": err,
+                "missing": missing,
+                "check": check,
+            }
+        )
     return pd.DataFrame(rows).set_index("suite")
 
 
-def _header(store: ResultsStore, protocols: pd.DataFrame, counts: pd.DataFrame, metric: str, warnings: list[str]) -> str:
-    lines = ["# awda_bench report", "", f"Store: `{store.path}`  ", f"Generated: {time.strftime('%Y-%m-%d %H:%M:%S %z')}", ""]
-    lines += [f"**Success metric:** {METRIC_TEXT[metric]}.  ",
-              "Both success_once and success_at_end are recorded; `report --metric` switches.  ",
-              f"**Cells:** mean over snapshots of each snapshot's success rate ± standard error across snapshots; "
-              f"`{tables.BINOMIAL_MARK}` marks a single snapshot, whose SE is binomial over its episodes. "
-              "Errors (`err`) are in no rate.", ""]  # fmt: skip
+def _header(
+    store: ResultsStore,
+    protocols: pd.DataFrame,
+    counts: pd.DataFrame,
+    metric: str,
+    warnings: list[str],
+) -> str:
+    lines = [
+        "# awda_bench report",
+        "",
+        f"Store: `{store.path}`  ",
+        f"Generated: {time.strftime('%Y-%m-%d %H:%M:%S %z')}",
+        "",
+    ]
+    lines += [
+        f"**Success metric:** {METRIC_TEXT[metric]}.  ",
+        "Both success_once and success_at_end are recorded; `report --metric` switches.  ",
+        "**Cells:** mean over snapshots of each snapshot's success rate ± standard error "
+        "across snapshots; "
+        f"`{tables.BINOMIAL_MARK}` marks a single snapshot, whose SE is binomial over its "
+        "episodes. "
+        "Errors (`err`) are in no rate.",
+        "",
+    ]
     if warnings:
         lines += ["## ⚠ WARNINGS", ""] + [f"- **{w}**" for w in warnings] + [""]
-    lines += ["## Protocols", "", "| suite | fingerprint | episodes | unit | base seed | horizon steps | evaluated tasks | suite file sha256 |", "|---|---|---:|---|---:|---:|---|---|"]
+    lines += [
+        "## Protocols",
+        "",
+        "| suite | fingerprint | episodes | unit | base seed | horizon steps | evaluated tasks "
+        "| suite file sha256 |",
+        "|---|---|---:|---|---:|---:|---|---|",
+    ]
     for _, p in protocols.iterrows():
         d = json.loads(p["definition"])
-        lines.append(f"| {p['suite']} | `{p['fingerprint']}` | {d['episodes']} | {d['episode_unit']} | {d['base_seed']} | "
-                     f"{d['horizon_steps']} | {d['eval_tasks']} | `{d['suite_sha256'][:12]}` |")  # fmt: skip
+        lines.append(
+            f"| {p['suite']} | `{p['fingerprint']}` | {d['episodes']} | {d['episode_unit']} "
+            f"| {d['base_seed']} | "
+            f"{d['horizon_steps']} | {d['eval_tasks']} | `{d['suite_sha256'][:12]}` |"
+        )
     lines += ["", "## Episode counts (expected vs recorded)", "", tables.to_markdown(counts)]
     lines += ["## Software", ""]
     runs = store.runs()
@@ -83,32 +124,44 @@ def _header(store: ResultsStore, protocols: pd.DataFrame, counts: pd.DataFrame, 
         for _, r in latest.iterrows():
             v = json.loads(r["versions"])
             listed = ", ".join(f"{k} {val}" for k, val in sorted(v.items()))
-            lines.append(f"- run of {suites.get(r['protocol'], r['protocol'])}/{r['method']}: {listed}")
+            lines.append(
+                f"- run of {suites.get(r['protocol'], r['protocol'])}/{r['method']}: {listed}"
+            )
     listed = ", ".join(f"{k} {val}" for k, val in sorted(software_versions().items()))
     lines += [f"- this report: {listed}", ""]
     return "\n".join(lines)
 
 
-def write_report(run_dir: Path, out_dir: Path, metric: str = aggregate.DEFAULT_METRIC) -> ReportResult:
+def write_report(
+    run_dir: Path, out_dir: Path, metric: str = aggregate.DEFAULT_METRIC
+) -> ReportResult:
     """Read ``run_dir``'s store and write every table and figure into ``out_dir``."""
     if metric not in aggregate.METRICS:
-        raise UsageError(f"unknown metric {metric!r}; choose one of: {', '.join(aggregate.METRICS)}")
+        raise UsageError(
+            f"unknown metric {metric!r}; choose one of: {', '.join(aggregate.METRICS)}"
+        )
     result = ReportResult(out_dir=out_dir)
     with ResultsStore(run_dir, create=False) as store:
         episodes, snapshots, protocols = store.episodes(), store.snapshots(), store.protocols()
         if episodes.empty:
-            raise UsageError(f"{store.path} holds no episodes yet; run `python -m awda_bench run` first")
+            raise UsageError(
+                f"{store.path} holds no episodes yet; run `python -m awda_bench run` first"
+            )
         per_snap = aggregate.per_snapshot(episodes, snapshots, metric)
         cells = aggregate.all_cells(episodes, snapshots, protocols, metric)
         counts = count_table(per_snap, protocols)
         for suite, row in counts.iterrows():
             if row["missing"]:
                 result.warnings.append(
-                    f"{suite}/{row['method']}: expected {row['expected']} episodes, recorded {row['ok'] + row['errors']} "
+                    f"{suite}/{row['method']}: expected {row['expected']} episodes, "
+                    f"recorded {row['ok'] + row['errors']} "
                     f"({row['missing']} missing) — re-run the same command to finish"
                 )
             if row["errors"]:
-                result.warnings.append(f"{suite}/{row['method']}: {row['errors']} episodes ended in errors (see errors.md)")
+                result.warnings.append(
+                    f"{suite}/{row['method']}: {row['errors']} episodes ended in errors "
+                    "(see errors.md)"
+                )
         header = _header(store, protocols, counts, metric, result.warnings)
 
     suite_of = protocols.set_index("fingerprint")["suite"]
@@ -120,17 +173,34 @@ def write_report(run_dir: Path, out_dir: Path, metric: str = aggregate.DEFAULT_M
     if s4 is not None:
         sections.append(("s4", "Table S4: success per family", s4))
     snap_table = per_snap.assign(suite=per_snap["protocol"].map(suite_of))[
-        ["suite", "method", "ord", "name", "snapshot", "episodes_expected", "ok", "errors", "successes", "rate"]
+        [
+            "suite",
+            "method",
+            "ord",
+            "name",
+            "snapshot",
+            "episodes_expected",
+            "ok",
+            "errors",
+            "successes",
+            "rate",
+        ]
     ].set_index("suite")
     sections.append(("per_snapshot", "Success per snapshot", snap_table))
     grasp = aggregate.grasp_analysis(episodes, metric).set_index("suite")
-    sections.append(("grasp", "Grasp analysis (rates over ok episodes; – = env does not report it)", grasp))
+    sections.append(
+        ("grasp", "Grasp analysis (rates over ok episodes; – = env does not report it)", grasp)
+    )
     sections.append(("counts", "Episode counts", counts))
     errors = episodes[episodes["status"] == "error"]
     if len(errors):
         err_table = errors.assign(
-            last_line=errors["error"].fillna("").map(lambda e: (e.strip().splitlines() or [""])[-1][:160])
-        )[["suite", "method", "snapshot", "task", "episode", "seed", "attempts", "last_line"]].set_index("suite")
+            last_line=errors["error"]
+            .fillna("")
+            .map(lambda e: (e.strip().splitlines() or [""])[-1][:160])
+        )[
+            ["suite", "method", "snapshot", "task", "episode", "seed", "attempts", "last_line"]
+        ].set_index("suite")
         sections.append(("errors", "Errors (full tracebacks in the store)", err_table))
 
     body = [header]
@@ -142,11 +212,18 @@ def write_report(run_dir: Path, out_dir: Path, metric: str = aggregate.DEFAULT_M
     for (proto, method), g in per_snap.groupby(["protocol", "method"]):
         if bool(g["learned"].any()):
             path = out_dir / "figures" / f"success_vs_snapshot_{suite_of[proto]}_{method}.png"
-            result.files.append(plot_success_vs_snapshot(g.sort_values("ord"), f"{suite_of[proto]} / {method} ({metric})", path))
+            result.files.append(
+                plot_success_vs_snapshot(
+                    g.sort_values("ord"), f"{suite_of[proto]} / {method} ({metric})", path
+                )
+            )
 
     summary = {
         "metric": metric,
-        "protocols": {r["suite"]: {"fingerprint": r["fingerprint"], **json.loads(r["definition"])} for _, r in protocols.iterrows()},
+        "protocols": {
+            r["suite"]: {"fingerprint": r["fingerprint"], **json.loads(r["definition"])}
+            for _, r in protocols.iterrows()
+        },
         "counts": counts.reset_index().to_dict(orient="records"),
         "cells": [c.to_dict() for c in cells],
         "warnings": result.warnings,

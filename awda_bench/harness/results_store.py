@@ -91,10 +91,27 @@ CREATE TABLE IF NOT EXISTS runs (
 """
 
 EPISODE_COLUMNS = (
-    "protocol", "method", "snapshot", "suite", "task", "family", "episode", "seed", "demo_seed",
-    "success_once", "success_at_end", "reached", "grasped", "steps", "wall_time_s", "act_time_s",
-    "env_time_s", "status", "error", "waypoints",
-)  # fmt: skip
+    "protocol",
+    "method",
+    "snapshot",
+    "suite",
+    "task",
+    "family",
+    "episode",
+    "seed",
+    "demo_seed",
+    "success_once",
+    "success_at_end",
+    "reached",
+    "grasped",
+    "steps",
+    "wall_time_s",
+    "act_time_s",
+    "env_time_s",
+    "status",
+    "error",
+    "waypoints",
+)
 
 
 def _bool(value: bool | None) -> int | None:
@@ -109,7 +126,8 @@ class ResultsStore:
         if not self.path.is_file():
             if not create:
                 raise UsageError(
-                    f"no results store at {self.path}; run `python -m awda_bench run` first or pass --runs"
+                    f"no results store at {self.path}; "
+                    "run `python -m awda_bench run` first or pass --runs"
                 )
             self.path.parent.mkdir(parents=True, exist_ok=True)
         self._conn = sqlite3.connect(self.path, timeout=30)
@@ -121,12 +139,19 @@ class ResultsStore:
 
     def _check_or_init(self, create: bool) -> None:
         try:
-            tables = {r[0] for r in self._conn.execute("SELECT name FROM sqlite_master WHERE type='table'")}
+            tables = {
+                r[0]
+                for r in self._conn.execute("SELECT name FROM sqlite_master WHERE type='table'")
+            }
         except sqlite3.DatabaseError as exc:
-            raise CorruptFileError(f"{self.path} is not a results store ({exc}); move it away") from exc
+            raise CorruptFileError(
+                f"{self.path} is not a results store ({exc}); move it away"
+            ) from exc
         if tables:
             if "meta" not in tables:
-                raise CorruptFileError(f"{self.path} is not an awda_bench results store; move it away")
+                raise CorruptFileError(
+                    f"{self.path} is not an awda_bench results store; move it away"
+                )
             row = self._conn.execute("SELECT value FROM meta WHERE key='schema_version'").fetchone()
             if row is None or row[0] != SCHEMA_VERSION:
                 found = None if row is None else row[0]
@@ -164,7 +189,9 @@ class ResultsStore:
             theirs = json.loads(row[1])
             ours = json.loads(protocol.to_json())
             diff = ", ".join(
-                f"{k}={theirs.get(k)!r}->{ours[k]!r}" for k in sorted(ours) if theirs.get(k) != ours[k]
+                f"{k}={theirs.get(k)!r}->{ours[k]!r}"
+                for k in sorted(ours)
+                if theirs.get(k) != ours[k]
             )
             raise ProtocolMismatchError(
                 f"{self.path} holds suite {protocol.suite!r} under protocol {row[0]}, this run is "
@@ -172,25 +199,51 @@ class ResultsStore:
             )
 
     def plan(
-        self, protocol: EvalProtocol, method: str, learned: bool, snapshots: Iterable[SnapshotRef],
-        episodes_expected: int, command: str, versions: dict[str, str], display_name: str = "",
-    ) -> None:  # fmt: skip
+        self,
+        protocol: EvalProtocol,
+        method: str,
+        learned: bool,
+        snapshots: Iterable[SnapshotRef],
+        episodes_expected: int,
+        command: str,
+        versions: dict[str, str],
+        display_name: str = "",
+    ) -> None:
         """Record the protocol, the snapshots about to be evaluated and this run's invocation."""
         self.check_protocol(protocol)
         with self._conn:
             self._conn.execute(
                 "INSERT OR IGNORE INTO protocols VALUES (?, ?, ?, ?)",
-                (protocol.fingerprint, protocol.suite, display_name or protocol.suite, protocol.to_json()),
+                (
+                    protocol.fingerprint,
+                    protocol.suite,
+                    display_name or protocol.suite,
+                    protocol.to_json(),
+                ),
             )
             for snap in snapshots:
                 self._conn.execute(
                     "INSERT OR REPLACE INTO snapshots VALUES (?, ?, ?, ?, ?, ?, ?)",
-                    (protocol.fingerprint, method, snap.sha256, snap.name, snap.order, int(learned),
-                     episodes_expected),
-                )  # fmt: skip
+                    (
+                        protocol.fingerprint,
+                        method,
+                        snap.sha256,
+                        snap.name,
+                        snap.order,
+                        int(learned),
+                        episodes_expected,
+                    ),
+                )
             self._conn.execute(
-                "INSERT INTO runs (started_at, protocol, method, command, versions) VALUES (?, ?, ?, ?, ?)",
-                (time.time(), protocol.fingerprint, method, command, json.dumps(versions, sort_keys=True)),
+                "INSERT INTO runs (started_at, protocol, method, command, versions) "
+                "VALUES (?, ?, ?, ?, ?)",
+                (
+                    time.time(),
+                    protocol.fingerprint,
+                    method,
+                    command,
+                    json.dumps(versions, sort_keys=True),
+                ),
             )
 
     # --- episodes ------------------------------------------------------------------------------
@@ -198,7 +251,8 @@ class ResultsStore:
     def finished_keys(self, protocol: str, method: str, snapshot: str) -> set[tuple[int, int]]:
         """``(task, episode)`` of the episodes already recorded with status ok."""
         rows = self._conn.execute(
-            "SELECT task, episode FROM episodes WHERE protocol=? AND method=? AND snapshot=? AND status=?",
+            "SELECT task, episode FROM episodes "
+            "WHERE protocol=? AND method=? AND snapshot=? AND status=?",
             (protocol, method, snapshot, STATUS_OK),
         )
         return {(int(t), int(e)) for t, e in rows}
@@ -206,18 +260,34 @@ class ResultsStore:
     def record(self, protocol: str, rec: EpisodeRecord) -> None:
         """Insert or replace one episode's row and commit; an ok row is never overwritten."""
         values = (
-            protocol, rec.method, rec.snapshot, rec.suite, rec.task, rec.family, rec.episode,
-            rec.seed, rec.demo_seed, _bool(rec.success_once), _bool(rec.success_at_end),
-            _bool(rec.reached), _bool(rec.grasped), rec.steps, rec.wall_time_s, rec.act_time_s,
-            rec.env_time_s, rec.status, rec.error,
+            protocol,
+            rec.method,
+            rec.snapshot,
+            rec.suite,
+            rec.task,
+            rec.family,
+            rec.episode,
+            rec.seed,
+            rec.demo_seed,
+            _bool(rec.success_once),
+            _bool(rec.success_at_end),
+            _bool(rec.reached),
+            _bool(rec.grasped),
+            rec.steps,
+            rec.wall_time_s,
+            rec.act_time_s,
+            rec.env_time_s,
+            rec.status,
+            rec.error,
             None if rec.waypoints is None else json.dumps(rec.waypoints),
-        )  # fmt: skip
+        )
         placeholders = ", ".join("?" * len(EPISODE_COLUMNS))
         columns = ", ".join(EPISODE_COLUMNS)
         updates = ", ".join(f"{c}=excluded.{c}" for c in EPISODE_COLUMNS[3:])
         with self._conn:
             self._conn.execute(
-                f"INSERT INTO episodes ({columns}, attempts, finished_at) VALUES ({placeholders}, 1, ?) "
+                f"INSERT INTO episodes ({columns}, attempts, finished_at) "
+                f"VALUES ({placeholders}, 1, ?) "
                 "ON CONFLICT (protocol, method, snapshot, task, episode) DO UPDATE SET "
                 f"{updates}, attempts=episodes.attempts+1, finished_at=excluded.finished_at "
                 "WHERE episodes.status != 'ok'",
@@ -227,10 +297,14 @@ class ResultsStore:
     # --- reading -------------------------------------------------------------------------------
 
     def episodes(self) -> pd.DataFrame:
-        return pd.read_sql_query("SELECT * FROM episodes ORDER BY protocol, method, snapshot, task, episode", self._conn)
+        return pd.read_sql_query(
+            "SELECT * FROM episodes ORDER BY protocol, method, snapshot, task, episode", self._conn
+        )
 
     def snapshots(self) -> pd.DataFrame:
-        return pd.read_sql_query("SELECT * FROM snapshots ORDER BY protocol, method, ord", self._conn)
+        return pd.read_sql_query(
+            "SELECT * FROM snapshots ORDER BY protocol, method, ord", self._conn
+        )
 
     def protocols(self) -> pd.DataFrame:
         return pd.read_sql_query("SELECT * FROM protocols ORDER BY suite", self._conn)

@@ -23,10 +23,25 @@ from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
 from awda_bench.harness.episode_specs import EvalProtocol, build_episode_specs, make_protocol
 from awda_bench.harness.methods import MethodSpec, SnapshotRef, get_method, select_snapshots
 from awda_bench.harness.results_store import ResultsStore
-from awda_bench.harness.worker_pool import DEFAULT_ENV_FACTORY, Job, WorkerConfig, WorkerPool, run_inline
+from awda_bench.harness.worker_pool import (
+    DEFAULT_ENV_FACTORY,
+    Job,
+    WorkerConfig,
+    WorkerPool,
+    run_inline,
+)
 from awda_bench.suites import SUITES_DIR, Suite, load_suite
 
-VERSIONED_PACKAGES = ("awda_bench", "mani-skill", "sapien", "mink", "mujoco", "gymnasium", "torch", "numpy")
+VERSIONED_PACKAGES = (
+    "awda_bench",
+    "mani-skill",
+    "sapien",
+    "mink",
+    "mujoco",
+    "gymnasium",
+    "torch",
+    "numpy",
+)
 """Packages whose versions are recorded with every run and printed in the report header."""
 
 
@@ -106,6 +121,12 @@ class SweepResult:
     """Sum of the played episodes' own wall times [s]."""
     respawns: int
     """Workers replaced after a hang or crash."""
+    startup_s: float = 0.0
+    """Part of ``wall_time_s`` until every worker had built its env [s] (0 in-process)."""
+    act_time_s: float = 0.0
+    """Sum over played episodes of time in ``policy.reset``/``policy.act`` [s]."""
+    env_time_s: float = 0.0
+    """Sum over played episodes of time in ``env.reset``/``env.step`` [s]."""
 
 
 def prepare_sweep(config: SweepConfig) -> SweepPlan:
@@ -117,7 +138,8 @@ def prepare_sweep(config: SweepConfig) -> SweepPlan:
         if task not in protocol.eval_tasks:
             suite.task(task)  # unknown task: lists the valid ones
             raise UsageError(
-                f"task {task} of suite {suite.name!r} is not evaluated; choose among {list(protocol.eval_tasks)}"
+                f"task {task} of suite {suite.name!r} is not evaluated; "
+                f"choose among {list(protocol.eval_tasks)}"
             )
     if config.tasks:
         specs = [s for s in specs if s.task in config.tasks]
@@ -139,9 +161,15 @@ def run_sweep(config: SweepConfig) -> SweepResult:
     with ResultsStore(config.out, create=True) as store:
         store.check_protocol(plan.protocol)
         store.plan(
-            plan.protocol, plan.method.name, plan.method.learned, plan.snapshots,
-            plan.expected_per_snapshot, config.command, software_versions(), plan.suite.display_name,
-        )  # fmt: skip
+            plan.protocol,
+            plan.method.name,
+            plan.method.learned,
+            plan.snapshots,
+            plan.expected_per_snapshot,
+            config.command,
+            software_versions(),
+            plan.suite.display_name,
+        )
         finished = {
             snap.sha256: store.finished_keys(fingerprint, plan.method.name, snap.sha256)
             for snap in plan.snapshots
@@ -157,16 +185,23 @@ def run_sweep(config: SweepConfig) -> SweepResult:
         )[0]
         counts = {"ok": int(done_ok[0]), "success": int(done_ok[1]), "errors": 0, "ran": 0}
         episode_time = 0.0
+        inner = {"act": 0.0, "env": 0.0}
         bar = tqdm(
-            total=len(plan.jobs), initial=skipped, disable=not config.progress, unit="ep",
-            desc=f"{plan.suite.name}/{plan.method.name}", dynamic_ncols=True,
-        )  # fmt: skip
+            total=len(plan.jobs),
+            initial=skipped,
+            disable=not config.progress,
+            unit="ep",
+            desc=f"{plan.suite.name}/{plan.method.name}",
+            dynamic_ncols=True,
+        )
 
         def on_result(record: EpisodeRecord) -> None:
             nonlocal episode_time
             store.record(fingerprint, record)
             counts["ran"] += 1
             episode_time += record.wall_time_s
+            inner["act"] += record.act_time_s
+            inner["env"] += record.env_time_s
             if record.status == STATUS_OK:
                 counts["ok"] += 1
                 counts["success"] += int(bool(record.success_once))
@@ -185,19 +220,27 @@ def run_sweep(config: SweepConfig) -> SweepResult:
             episode_timeout_s=config.episode_timeout_s,
         )
         t0 = time.perf_counter()
-        respawns = 0
+        respawns, startup = 0, 0.0
         try:
             if pending and config.workers == 0:
                 run_inline(pending, worker_config, on_result)
             elif pending:
                 pool = WorkerPool(worker_config, config.workers, plan.suite)
                 pool.run(pending, on_result)
-                respawns = pool.respawns
+                respawns, startup = pool.respawns, pool.startup_s
         finally:
             bar.close()
         wall = time.perf_counter() - t0
     return SweepResult(
-        planned=len(plan.jobs), skipped=skipped, ran=counts["ran"], errors=counts["errors"],
-        successes=counts["success"] - int(done_ok[1]), wall_time_s=wall,
-        episode_time_s=episode_time, respawns=respawns,
-    )  # fmt: skip
+        planned=len(plan.jobs),
+        skipped=skipped,
+        ran=counts["ran"],
+        errors=counts["errors"],
+        successes=counts["success"] - int(done_ok[1]),
+        wall_time_s=wall,
+        episode_time_s=episode_time,
+        respawns=respawns,
+        startup_s=startup,
+        act_time_s=inner["act"],
+        env_time_s=inner["env"],
+    )

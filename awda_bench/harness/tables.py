@@ -36,11 +36,15 @@ def table_s3(cells: list[Cell], display_names: dict[str, str]) -> pd.DataFrame:
     suites = sorted({c.suite for c in whole})
     index = {(c.suite, c.method): c for c in whole}
     data = [[format_cell(index.get((s, m))) for m in methods] for s in suites]
-    return pd.DataFrame(data, index=pd.Index([display_names.get(s, s) for s in suites], name="Suite"), columns=methods)
+    return pd.DataFrame(
+        data,
+        index=pd.Index([display_names.get(s, s) for s in suites], name="Suite"),
+        columns=methods,
+    )
 
 
 def table_s4(cells: list[Cell]) -> pd.DataFrame | None:
-    """Rows = (suite,) methods, columns = the six S4 families + All; ``None`` without S4 families."""
+    """Rows = methods (per suite), columns = the six S4 families + All; ``None`` if none."""
     keys = {k for k, _ in S4_FAMILIES}
     suites = sorted({c.suite for c in cells if c.group in keys})
     if not suites:
@@ -60,7 +64,10 @@ def table_s4(cells: list[Cell]) -> pd.DataFrame | None:
 
 def to_markdown(df: pd.DataFrame) -> str:
     header = [str(df.index.name or "")] + [str(c) for c in df.columns]
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] + ["---:"] * len(df.columns)) + "|"]
+    lines = [
+        "| " + " | ".join(header) + " |",
+        "|" + "|".join(["---"] + ["---:"] * len(df.columns)) + "|",
+    ]
     for label, row in df.iterrows():
         lines.append("| " + " | ".join([str(label)] + [_text(v) for v in row]) + " |")
     return "\n".join(lines) + "\n"
@@ -74,8 +81,19 @@ def _text(value: object) -> str:
     return str(value)
 
 
-_LATEX_ESCAPES = {"&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{", "}": r"\}",
-                  "±": r"$\pm$", BINOMIAL_MARK: r"$^\dagger$", "–": "--", "~": r"\textasciitilde{}"}  # fmt: skip
+_LATEX_ESCAPES = {
+    "&": r"\&",
+    "%": r"\%",
+    "$": r"\$",
+    "#": r"\#",
+    "_": r"\_",
+    "{": r"\{",
+    "}": r"\}",
+    "±": r"$\pm$",
+    BINOMIAL_MARK: r"$^\dagger$",
+    "–": "--",
+    "~": r"\textasciitilde{}",
+}
 
 
 def _latex(text: str) -> str:

@@ -40,14 +40,17 @@ def grab_frame(env: Any) -> tuple[np.ndarray, dict[str, np.ndarray] | None]:
         from awda_bench.robot.cameras import capture_rgb
 
         frame = capture_rgb(env, THIRD_PERSON)[0]
-        params = {k: np.asarray(v.cpu() if hasattr(v, "cpu") else v)[0] for k, v in sensors[THIRD_PERSON].get_params().items()}
+        params = {
+            k: np.asarray(v.cpu() if hasattr(v, "cpu") else v)[0]
+            for k, v in sensors[THIRD_PERSON].get_params().items()
+        }
         return frame, params
     frame = np.asarray(env.render())
     return (frame[0] if frame.ndim == 4 else frame).astype(np.uint8), None
 
 
 def choose_episodes(rows: list[tuple[int, int, int]], k: int) -> list[tuple[int, int, bool]]:
-    """From ``(task, episode, success)`` rows: the first ``k`` successes and ``k`` failures per task."""
+    """From ``(task, episode, success)`` rows: the first ``k`` successes and failures per task."""
     chosen = []
     for task in sorted({r[0] for r in rows}):
         for outcome in (True, False):
@@ -63,7 +66,12 @@ def record_videos(config: SweepConfig, k: int) -> list[Path]:
     method = get_method(config.method)
     snapshots = select_snapshots(method, config.checkpoints, config.snapshots)
     executor = EpisodeExecutor(
-        WorkerConfig(suite_name=suite.name, suites_dir=str(config.suites_dir), env_factory=config.env_factory, render_mode="rgb_array")
+        WorkerConfig(
+            suite_name=suite.name,
+            suites_dir=str(config.suites_dir),
+            env_factory=config.env_factory,
+            render_mode="rgb_array",
+        )
     )
     written: list[Path] = []
     try:
@@ -77,7 +85,9 @@ def record_videos(config: SweepConfig, k: int) -> list[Path]:
                 seeds = {(r[0], r[1]): (r[3], r[4]) for r in rows}
                 for task, episode, success in choose_episodes([r[:3] for r in rows], k):
                     seed, demo_seed = seeds[(task, episode)]
-                    spec = EpisodeSpec(suite=suite.name, task=task, episode=episode, seed=seed, demo_seed=demo_seed)
+                    spec = EpisodeSpec(
+                        suite=suite.name, task=task, episode=episode, seed=seed, demo_seed=demo_seed
+                    )
                     frames: list[np.ndarray] = []
                     params: list[dict[str, np.ndarray] | None] = []
 
@@ -88,24 +98,53 @@ def record_videos(config: SweepConfig, k: int) -> list[Path]:
                             params.append(p)
 
                     extras: dict[str, Any] = {}
-                    record = executor.play(Job(spec=spec, method=method, snapshot=snap), on_frame=on_frame, extras=extras)
+                    record = executor.play(
+                        Job(spec=spec, method=method, snapshot=snap),
+                        on_frame=on_frame,
+                        extras=extras,
+                    )
                     if record.status != "ok":
-                        print(f"warning: replay of task {task} episode {episode} failed: {(record.error or '').strip().splitlines()[-1]}", file=sys.stderr)
+                        print(
+                            f"warning: replay of task {task} episode {episode} failed: "
+                            f"{(record.error or '').strip().splitlines()[-1]}",
+                            file=sys.stderr,
+                        )
                         continue
                     stem = f"task{task}_ep{episode}_{'success' if success else 'failure'}"
                     if bool(record.success_once) != success:
                         stem += "_replay-differs"
-                        print(f"warning: replay of task {task} episode {episode} changed outcome", file=sys.stderr)
-                    directory = config.out / "videos" / suite.name / method.name.replace(":", "_") / snap.sha256
-                    written.append(write_mp4(frames, directory / f"{stem}.mp4", fps=suite.control_freq_hz))
+                        print(
+                            f"warning: replay of task {task} episode {episode} changed outcome",
+                            file=sys.stderr,
+                        )
+                    directory = (
+                        config.out
+                        / "videos"
+                        / suite.name
+                        / method.name.replace(":", "_")
+                        / snap.sha256
+                    )
+                    written.append(
+                        write_mp4(frames, directory / f"{stem}.mp4", fps=suite.control_freq_hz)
+                    )
                     if record.waypoints and params and params[0] is not None:
                         wp = np.asarray(record.waypoints, dtype=float)
-                        pixels = project_points(wp[:, :3], params[0]["intrinsic_cv"], params[0]["extrinsic_cv"])
-                        grasp = [bool(g > 0.5) for g in wp[:, 3]] if wp.shape[1] > 3 else [False] * len(wp)
-                        demo = [np.asarray(f) for f in extras.get("demo_frames", [])]  # none until a policy provides them
+                        pixels = project_points(
+                            wp[:, :3], params[0]["intrinsic_cv"], params[0]["extrinsic_cv"]
+                        )
+                        grasp = (
+                            [bool(g > 0.5) for g in wp[:, 3]]
+                            if wp.shape[1] > 3
+                            else [False] * len(wp)
+                        )
+                        demo = [
+                            np.asarray(f) for f in extras.get("demo_frames", [])
+                        ]  # none until a policy provides them
                         image = fig_s5(demo, frames[0], pixels, grasp)
                         written.append(write_png(image, directory / f"{stem}_waypoints.png"))
-                        (directory / f"{stem}_waypoints.json").write_text(json.dumps(record.waypoints))
+                        (directory / f"{stem}_waypoints.json").write_text(
+                            json.dumps(record.waypoints)
+                        )
     finally:
         executor.close()
     return written

@@ -80,10 +80,18 @@ def error_record(job: Job, family: str, message: str, wall_time_s: float = 0.0) 
     """The record of an episode that raised, hung or lost its worker."""
     s = job.spec
     return EpisodeRecord(
-        suite=s.suite, task=s.task, family=family, episode=s.episode, seed=s.seed,
-        demo_seed=s.demo_seed, method=job.method.name, snapshot=job.snapshot.sha256,
-        status=STATUS_ERROR, error=message, wall_time_s=wall_time_s,
-    )  # fmt: skip
+        suite=s.suite,
+        task=s.task,
+        family=family,
+        episode=s.episode,
+        seed=s.seed,
+        demo_seed=s.demo_seed,
+        method=job.method.name,
+        snapshot=job.snapshot.sha256,
+        status=STATUS_ERROR,
+        error=message,
+        wall_time_s=wall_time_s,
+    )
 
 
 class EpisodeExecutor:
@@ -96,7 +104,9 @@ class EpisodeExecutor:
         self._policy_key: tuple[str, str] | None = None
         self._policy: Policy | None = None
 
-    def play(self, job: Job, on_frame: FrameHook | None = None, extras: dict[str, Any] | None = None) -> EpisodeRecord:
+    def play(
+        self, job: Job, on_frame: FrameHook | None = None, extras: dict[str, Any] | None = None
+    ) -> EpisodeRecord:
         t0 = time.perf_counter()
         try:
             key = (job.method.name, job.snapshot.sha256)
@@ -105,9 +115,15 @@ class EpisodeExecutor:
                 self._policy = make_policy(job.method, job.snapshot)
                 self._policy_key = key
             return run_episode(
-                self.env, self._policy, job.spec, self.suite,
-                method=job.method.name, snapshot=job.snapshot.sha256, on_frame=on_frame, extras=extras,
-            )  # fmt: skip
+                self.env,
+                self._policy,
+                job.spec,
+                self.suite,
+                method=job.method.name,
+                snapshot=job.snapshot.sha256,
+                on_frame=on_frame,
+                extras=extras,
+            )
         except Exception:  # recorded with its traceback; the sweep goes on
             family = self.suite.task(job.spec.task).family
             return error_record(job, family, traceback.format_exc(), time.perf_counter() - t0)
@@ -138,7 +154,9 @@ def _worker_main(conn: Connection, config: WorkerConfig) -> None:
 @contextmanager
 def _single_threaded_children() -> Iterator[None]:
     """Spawned children inherit the environment: make their BLAS/OpenMP/torch single-threaded."""
-    saved = {k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")}
+    saved = {
+        k: os.environ.get(k) for k in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+    }
     os.environ.update({k: "1" for k in saved})
     try:
         yield
@@ -179,13 +197,17 @@ class WorkerPool:
         self.suite = suite
         self._ctx = mp.get_context("spawn")
         self.respawns = 0
+        self.startup_s = 0.0
+        """Time from the start of :meth:`run` until every first-generation worker was ready [s]."""
 
     def _family(self, job: Job) -> str:
         return self.suite.task(job.spec.task).family
 
     def run(self, jobs: Sequence[Job], on_result: Callable[[EpisodeRecord], None]) -> None:
         queue = deque(jobs)
+        t_start = time.monotonic()
         slots = [_Slot(self._ctx, self.config) for _ in range(min(self.workers, len(jobs)))]
+        waiting_first = len(slots)
         try:
             while queue or any(s.job is not None for s in slots):
                 for slot in slots:
@@ -195,22 +217,40 @@ class WorkerPool:
                         slot.conn.send(slot.job)
                 now = time.monotonic()
                 deadlines = [
-                    s.since + (self.config.episode_timeout_s if s.ready else self.config.start_timeout_s)
+                    s.since
+                    + (self.config.episode_timeout_s if s.ready else self.config.start_timeout_s)
                     for s in slots
                 ]
                 timeout = max(0.0, min(min(deadlines) - now, 1.0))
                 for conn in wait([s.conn for s in slots], timeout=timeout):
                     index = next(i for i, s in enumerate(slots) if s.conn is conn)
+                    was_ready = slots[index].ready
                     slots[index] = self._receive(slots[index], on_result)
+                    if (
+                        waiting_first
+                        and not was_ready
+                        and slots[index].ready
+                        and self.respawns == 0
+                    ):
+                        waiting_first -= 1
+                        if not waiting_first:
+                            self.startup_s = time.monotonic() - t_start
                 now = time.monotonic()
                 for i, slot in enumerate(slots):
                     if not slot.ready and now > slot.since + self.config.start_timeout_s:
                         raise WorkerStartError(
-                            f"a worker did not build its env within {self.config.start_timeout_s:.0f} s; "
+                            f"a worker did not build its env within "
+                            f"{self.config.start_timeout_s:.0f} s; "
                             "check `python -m awda_bench doctor`"
                         )
                     if slot.job is not None and now > slot.since + self.config.episode_timeout_s:
-                        on_result(self._lost(slot, f"watchdog: episode exceeded {self.config.episode_timeout_s:g} s; worker killed"))
+                        on_result(
+                            self._lost(
+                                slot,
+                                f"watchdog: episode exceeded {self.config.episode_timeout_s:g} s; "
+                                "worker killed",
+                            )
+                        )
                         slots[i] = self._respawn(slot)
         finally:
             for slot in slots:
@@ -226,7 +266,9 @@ class WorkerPool:
 
     def _lost(self, slot: _Slot, message: str) -> EpisodeRecord:
         assert slot.job is not None
-        return error_record(slot.job, self._family(slot.job), message, time.monotonic() - slot.since)
+        return error_record(
+            slot.job, self._family(slot.job), message, time.monotonic() - slot.since
+        )
 
     def _respawn(self, slot: _Slot) -> _Slot:
         slot.kill()
@@ -239,7 +281,11 @@ class WorkerPool:
         except (EOFError, OSError):
             slot.process.join(timeout=5)
             if slot.job is not None:
-                on_result(self._lost(slot, f"worker died (exit code {slot.process.exitcode}) during the episode"))
+                on_result(
+                    self._lost(
+                        slot, f"worker died (exit code {slot.process.exitcode}) during the episode"
+                    )
+                )
                 return self._respawn(slot)
             raise WorkerStartError(
                 f"a worker exited (code {slot.process.exitcode}) before building its env"

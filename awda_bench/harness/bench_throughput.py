@@ -1,0 +1,120 @@
+"""``python -m awda_bench bench harness``: episodes/minute with 1 and 2 workers, the parallel
+speed-up, and the harness's own overhead as a share of episode time (goal < 5 %).
+
+Each worker count runs the same sweep into its own temporary store. Definitions::
+
+    episodes/min          = episodes / sweep wall time * 60         (worker start-up included)
+    steady episodes/min   = episodes / (wall - start-up) * 60
+    harness overhead      = 1 - sum(episode wall) / (workers * (wall - start-up))
+                            (scheduling, IPC, store commits, idle tail: everything outside episodes)
+    in-episode overhead   = sum(episode wall - policy time - env time) / sum(episode wall)
+"""
+
+from __future__ import annotations
+
+import argparse
+import sqlite3
+import tempfile
+from pathlib import Path
+
+from awda_bench.harness.methods import DEFAULT_METHOD
+from awda_bench.harness.results_store import STORE_NAME
+from awda_bench.harness.sweep import SweepConfig, SweepResult, run_sweep
+from awda_bench.harness.worker_pool import DEFAULT_ENV_FACTORY
+from awda_bench.suites import SUITES_DIR
+
+
+def add_harness_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--suite", default="pick_place", help="suite (default pick_place)")
+    parser.add_argument(
+        "--method", default=DEFAULT_METHOD, help=f"method (default {DEFAULT_METHOD})"
+    )
+    parser.add_argument(
+        "--episodes", type=int, default=4, help="episodes per held-out task (default 4)"
+    )
+    parser.add_argument(
+        "--workers", type=int, nargs="+", default=[1, 2], help="worker counts (default 1 2)"
+    )
+    parser.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
+    parser.add_argument("--keep", type=Path, help="keep the run directories under this path")
+    parser.add_argument("--tasks-dir", type=Path, default=SUITES_DIR, help=argparse.SUPPRESS)
+    parser.add_argument("--env-factory", default=DEFAULT_ENV_FACTORY, help=argparse.SUPPRESS)
+
+
+def _outcomes(run_dir: Path) -> list[tuple]:
+    db = sqlite3.connect(run_dir / STORE_NAME)
+    try:
+        return db.execute(
+            "SELECT task, episode, status, success_once, success_at_end, reached, grasped, steps "
+            "FROM episodes ORDER BY task, episode"
+        ).fetchall()
+    finally:
+        db.close()
+
+
+def describe(workers: int, r: SweepResult) -> dict[str, float]:
+    busy = max(r.wall_time_s - r.startup_s, 1e-9)
+    return {
+        "workers": workers,
+        "episodes": r.ran,
+        "errors": r.errors,
+        "wall_s": r.wall_time_s,
+        "startup_s": r.startup_s,
+        "episodes_per_min": r.ran / r.wall_time_s * 60,
+        "steady_episodes_per_min": r.ran / busy * 60,
+        "mean_episode_s": r.episode_time_s / max(r.ran, 1),
+        "harness_overhead": 1 - r.episode_time_s / (max(workers, 1) * busy),
+        "in_episode_overhead": (r.episode_time_s - r.act_time_s - r.env_time_s)
+        / max(r.episode_time_s, 1e-9),
+    }
+
+
+def run_harness_bench(args: argparse.Namespace) -> int:
+    rows, outcomes = [], []
+    with tempfile.TemporaryDirectory(prefix="awda-bench-harness-") as tmp:
+        root = args.keep or Path(tmp)
+        for workers in args.workers:
+            out = root / f"workers{workers}"
+            config = SweepConfig(
+                suite=args.suite,
+                method=args.method,
+                out=out,
+                episodes=args.episodes,
+                seed=args.seed,
+                workers=workers,
+                suites_dir=args.tasks_dir,
+                env_factory=args.env_factory,
+                progress=False,
+                command=f"bench harness --workers {workers}",
+            )
+            result = run_sweep(config)
+            if result.skipped:
+                print(
+                    f"note: {result.skipped} episodes were already in {out}; "
+                    "only new ones are timed"
+                )
+            rows.append(describe(workers, result))
+            outcomes.append(_outcomes(out))
+    print(f"harness throughput: {args.suite} / {args.method}, {args.episodes} episodes per task")
+    print(
+        f"{'workers':>7} {'episodes':>8} {'wall s':>8} {'start s':>8} {'ep/min':>8} "
+        f"{'steady':>8} {'ep s':>7} {'overhead':>9} {'in-ep':>7}"
+    )
+    for r in rows:
+        print(
+            f"{r['workers']:>7} {r['episodes']:>8} {r['wall_s']:>8.1f} {r['startup_s']:>8.1f} "
+            f"{r['episodes_per_min']:>8.2f} {r['steady_episodes_per_min']:>8.2f} "
+            f"{r['mean_episode_s']:>7.2f} "
+            f"{r['harness_overhead']:>8.1%} {r['in_episode_overhead']:>7.2%}"
+        )
+    if len(rows) >= 2:
+        base = rows[0]
+        for r in rows[1:]:
+            print(
+                f"speed-up {r['workers']} vs {base['workers']} workers: "
+                f"{r['episodes_per_min'] / base['episodes_per_min']:.2f}x "
+                f"(steady {r['steady_episodes_per_min'] / base['steady_episodes_per_min']:.2f}x)"
+            )
+    same = all(o == outcomes[0] for o in outcomes[1:])
+    print(f"identical per-episode outcomes across worker counts: {'yes' if same else 'NO'}")
+    return 0 if same else 1
