@@ -11,6 +11,13 @@ at the robot's current TCP (index 0 is *not* a waypoint). Choice of indices::
     the rest   greedy Ramer-Douglas-Peucker: repeatedly add the step farthest from the polyline
                through x_0 and the chosen points, until K are chosen
 
+The polyline is the one the executor will *drive*: the grasp primitive ends ``grasp_lift_m`` above
+the grasp point, so after the grasp onset the polyline continues from that lifted point, and the
+path's own lift (the steps before it leaves a 2 cm column around the grasp point) is not a
+candidate. Without this, the lone free corner of K = 5 lands on the expert's lift (which the
+primitive already does) instead of the corner above the goal, and the carry cuts diagonally
+through the goal bin's wall.
+
 If the mandatory points alone exceed K, the latest ones are dropped first except the final step.
 Executed with :class:`~awda_bench.primitives.executor.WaypointExecutor`: the approach corner (the
 waypoint before the grasp) is raised 15 cm, the grasp point triggers the grasp primitive,
@@ -35,14 +42,33 @@ def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.nd
     return np.linalg.norm(p - (a + s[:, None] * ab), axis=1)
 
 
-def polyline_deviation(path: np.ndarray, anchors: list[int]) -> np.ndarray:
+def polyline_deviation(
+    path: np.ndarray, anchors: list[int], starts: dict[int, np.ndarray] | None = None
+) -> np.ndarray:
     """(T,) distance of every path point to the polyline through ``path[anchors]`` (sorted),
-    each point measured against the segment between the anchors that bracket it in time."""
+    each point measured against the segment between the anchors that bracket it in time.
+
+    ``starts[a]`` replaces ``path[a]`` as the start of the segment leaving anchor ``a``.
+    """
+    starts = starts or {}
     dev = np.zeros(len(path))
     for a, b in zip(anchors[:-1], anchors[1:], strict=True):
         if b - a > 1:
-            dev[a + 1 : b] = point_segment_distance(path[a + 1 : b], path[a], path[b])
+            start = starts.get(a, path[a])
+            dev[a + 1 : b] = point_segment_distance(path[a + 1 : b], start, path[b])
     return dev
+
+
+LIFT_COLUMN_RADIUS_M = 0.02
+"""After the grasp onset, path steps within this horizontal distance [m] of the grasp point (and
+before the path first leaves it) belong to the lift and are neither candidates nor deviations."""
+
+
+def _lift_column(path: np.ndarray, onset: int) -> int:
+    """First index after ``onset`` whose xy leaves the column around ``path[onset]``."""
+    r = np.linalg.norm(path[onset + 1 :, :2] - path[onset, :2], axis=1)
+    out = np.flatnonzero(r > LIFT_COLUMN_RADIUS_M)
+    return len(path) if out.size == 0 else onset + 1 + int(out[0])
 
 
 def _mandatory(path: np.ndarray, attributes: np.ndarray) -> list[int]:
@@ -62,8 +88,13 @@ def _mandatory(path: np.ndarray, attributes: np.ndarray) -> list[int]:
     return sorted({i for i in picks if i >= 1})
 
 
-def extract_waypoint_indices(path: np.ndarray, attributes: np.ndarray, K: int = 5) -> np.ndarray:
-    """The K chosen step indices (sorted, in 1..T-1); fewer only if the path has fewer steps."""
+def extract_waypoint_indices(
+    path: np.ndarray, attributes: np.ndarray, K: int = 5, grasp_lift_m: float = 0.15
+) -> np.ndarray:
+    """The K chosen step indices (sorted, in 1..T-1); fewer only if the path has fewer steps.
+
+    ``grasp_lift_m``: how far the grasp primitive lifts [m] (0 = plain RDP on the path).
+    """
     path = np.asarray(path, dtype=np.float64)
     attributes = np.asarray(attributes, dtype=bool)
     if attributes.ndim == 1:
@@ -78,17 +109,27 @@ def extract_waypoint_indices(path: np.ndarray, attributes: np.ndarray, K: int = 
     chosen = _mandatory(path, attributes)
     while len(chosen) > K:  # drop the latest non-final mandatory point
         chosen.pop(-2)
-    while len(chosen) < min(K, T - 1):
-        dev = polyline_deviation(path, [0, *chosen])
+    starts: dict[int, np.ndarray] = {}
+    excluded = np.zeros(T, dtype=bool)
+    grasp_on = np.flatnonzero(attributes[:, 0])
+    if grasp_lift_m > 0 and grasp_on.size:
+        onset = int(grasp_on[0])
+        starts[onset] = path[onset] + np.array([0.0, 0.0, grasp_lift_m])
+        excluded[onset + 1 : _lift_column(path, onset)] = True
+    while len(chosen) < min(K, T - 1 - int(excluded.sum())):
+        dev = polyline_deviation(path, [0, *chosen], starts)
         dev[[0, *chosen]] = -1.0
+        dev[excluded] = -1.0
         chosen = sorted([*chosen, int(np.argmax(dev))])
     return np.asarray(chosen, dtype=np.int64)
 
 
-def extract_waypoints(path: np.ndarray, attributes: np.ndarray, K: int = 5) -> np.ndarray:
+def extract_waypoints(
+    path: np.ndarray, attributes: np.ndarray, K: int = 5, grasp_lift_m: float = 0.15
+) -> np.ndarray:
     """Attributed waypoints ``(K, 3 + k)``: positions [m] and 0/1 attribute flags."""
     attributes = np.asarray(attributes, dtype=bool)
     if attributes.ndim == 1:
         attributes = attributes[:, None]
-    idx = extract_waypoint_indices(path, attributes, K)
+    idx = extract_waypoint_indices(path, attributes, K, grasp_lift_m)
     return np.hstack([np.asarray(path, np.float64)[idx], attributes[idx].astype(np.float64)])

@@ -70,11 +70,21 @@ def test_pick_place_keeps_the_mandatory_points_and_one_corner() -> None:
 
 def test_more_waypoints_add_the_farthest_corners_first() -> None:
     path, g, _ = _pick_place_path()
-    idx5 = set(extract_waypoint_indices(path, g, K=5).tolist())
-    idx7 = set(extract_waypoint_indices(path, g, K=7).tolist())
+    idx5 = set(extract_waypoint_indices(path, g, K=5, grasp_lift_m=0.0).tolist())
+    idx7 = set(extract_waypoint_indices(path, g, K=7, grasp_lift_m=0.0).tolist())
     assert idx5 < idx7
     # with 7 points the polyline follows the path within 1 cm
     assert polyline_deviation(path, [0, *sorted(idx7)]).max() < 0.01
+
+
+def test_the_grasp_primitives_lift_moves_the_free_corner_above_the_goal() -> None:
+    path, g, t = _pick_place_path()
+    lift_top, over_goal = 32, 47
+    plain = extract_waypoint_indices(path, g, K=5, grasp_lift_m=0.0)
+    assert lift_top in plain and over_goal not in plain
+    driven = extract_waypoint_indices(path, g, K=5, grasp_lift_m=0.15)
+    assert over_goal in driven and lift_top not in driven
+    assert all(not (t["grasp"] < i < 24 + 8) for i in driven)  # nothing inside the lift column
 
 
 def test_without_attributes_it_is_plain_rdp() -> None:

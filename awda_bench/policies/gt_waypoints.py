@@ -1,0 +1,210 @@
+"""``gt-waypoints``: ground-truth attributed waypoints executed by the motor primitives.
+
+The upper bound of any waypoint predictor on a suite (privileged: it reads the simulator state).
+Per episode::
+
+    reset(ctx):  S = env.get_state_dict()                          the real start
+                 expert rollout from S, recording a Trajectory     (plan on the scene itself)
+                 env.set_state_dict(S)                             back to the real start
+                 g = mine_grasp(trajectory)                        mined, not simulator truth
+                 W = extract_waypoints(tcp path, g, K=5)           (5, 3 + 1)
+    act(obs):    WaypointExecutor(W).step(state) per env          grasp uses wrist depth only
+
+Rendered frames per episode: wrist depth images during grasps only (one per HOVER step of the
+grasp primitive), counted in :attr:`GTWaypointsPolicy.stats`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+
+from awda_bench.mining import GraspMiningConfig, mine_grasp
+from awda_bench.policies.base import EpisodeContext, EpisodeSpec, Policy
+from awda_bench.primitives.base import RobotState
+from awda_bench.primitives.config import ExecutorConfig, LocalizationConfig
+from awda_bench.primitives.executor import WaypointExecutor
+from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION, WristLocator
+from awda_bench.trajectory import Trajectory
+from awda_bench.waypoints import extract_waypoints
+
+
+@dataclass(frozen=True)
+class GTWaypointsConfig:
+    """Settings of the ``gt-waypoints`` method."""
+
+    num_waypoints: int = 5
+    """K attributed waypoints per episode (the paper's downstream value)."""
+    planning_steps: int = 300
+    """Most control steps the expert may take while planning (15 s at 20 Hz)."""
+    executor: ExecutorConfig = ExecutorConfig()
+    """Primitive and execution parameters."""
+    mining: GraspMiningConfig = GraspMiningConfig()
+    """Grasp attribute mining."""
+    localization: LocalizationConfig = WRIST_LOCALIZATION
+    """Wrist-depth localization in the grasp primitive."""
+
+
+def _numpy(x: Any) -> np.ndarray:
+    if isinstance(x, torch.Tensor):
+        return x.detach().cpu().numpy()
+    return np.asarray(x)
+
+
+def robot_states(env: Any) -> list[RobotState]:
+    """Per-env :class:`RobotState` read from a ManiSkill env with the ``panda_awda`` agent."""
+    tcp = _numpy(env.agent.tcp_pose.p).astype(np.float64)
+    opening = _numpy(env.agent.gripper_opening_m).astype(np.float64).reshape(-1)
+    return [
+        RobotState(tcp_pos=tcp[i], gripper_opening_m=float(opening[i])) for i in range(len(tcp))
+    ]
+
+
+def record_rollouts(env: Any, policy: Policy, max_steps: int) -> list[Trajectory]:
+    """Run ``policy`` (already reset) on ``env`` from its current state; one Trajectory per env.
+
+    Stops when the policy is done or after ``max_steps``. ``truth["grasp"]`` is the simulator's
+    contact test on the target object when the env has one (``is_grasping_target``).
+    """
+    n = int(env.num_envs)
+    tcp, opening, actions, grasp = [], [], [], []
+    has_truth = hasattr(env, "is_grasping_target")
+    obs = env.get_obs()
+    for _ in range(max_steps):
+        if policy.done:
+            break
+        states = robot_states(env)
+        tcp.append([s.tcp_pos for s in states])
+        opening.append([s.gripper_opening_m for s in states])
+        if has_truth:
+            grasp.append(_numpy(env.is_grasping_target()).astype(bool).reshape(n))
+        action = np.asarray(policy.act(obs), dtype=np.float32).reshape(n, 4)
+        actions.append(action)
+        obs, *_ = env.step(action)
+    T = len(actions)
+    tcp_a = np.asarray(tcp, dtype=np.float64).reshape(T, n, 3)
+    open_a = np.asarray(opening, dtype=np.float64).reshape(T, n)
+    act_a = np.asarray(actions, dtype=np.float32).reshape(T, n, 4)
+    grasp_a = np.asarray(grasp, dtype=bool).reshape(T, n) if has_truth else None
+    return [
+        Trajectory(
+            tcp_pos=tcp_a[:, i],
+            gripper_opening_m=open_a[:, i],
+            actions=act_a[:, i],
+            truth={} if grasp_a is None else {"grasp": grasp_a[:, i]},
+            meta={"expert_done": bool(policy.done), "steps": T},
+        )
+        for i in range(n)
+    ]
+
+
+@dataclass
+class EpisodeStats:
+    """What one episode of ``gt-waypoints`` cost (reset by :meth:`GTWaypointsPolicy.reset`)."""
+
+    planning_s: float = 0.0
+    """Wall time of the expert rollout + state save/restore [s] (simulation)."""
+    planning_steps: int = 0
+    act_calls: int = 0
+    act_s: float = 0.0
+    """Wall time inside :meth:`GTWaypointsPolicy.act` [s], rendering and localization included."""
+    frames: int = 0
+    """Wrist depth frames rendered."""
+    capture_s: float = 0.0
+    """Of ``act_s``: rendering the wrist depth frames [s]."""
+    localize_s: float = 0.0
+    """Of ``act_s``: localization on the frames [s]."""
+    trajectories: list[Trajectory] = field(default_factory=list)
+
+    @property
+    def overhead_per_step_ms(self) -> float:
+        """Primitive + executor time per env step, rendering excluded [ms]."""
+        if self.act_calls == 0:
+            return 0.0
+        return 1e3 * (self.act_s - self.capture_s) / self.act_calls
+
+
+class GTWaypointsPolicy:
+    """Plans with the suite's scripted expert on the scene itself, then executes K waypoints."""
+
+    name = "gt-waypoints"
+
+    def __init__(self, config: GTWaypointsConfig | None = None) -> None:
+        self.config = config or GTWaypointsConfig()
+        self._env: Any = None
+        self._executors: list[WaypointExecutor] = []
+        self._locators: list[WristLocator] = []
+        self._waypoints: np.ndarray | None = None
+        self.stats = EpisodeStats()
+
+    # ------------------------------------------------------------------ planning
+    def plan(self, ctx: EpisodeContext) -> list[Trajectory]:
+        """Expert rollout(s) from the current scene, which is restored afterwards."""
+        from awda_bench.experts import make_expert
+
+        env = ctx.env
+        saved = env.get_state_dict()
+        elapsed = env._elapsed_steps.clone() if hasattr(env, "_elapsed_steps") else None
+        expert = make_expert(ctx.spec.suite, embodiment="agent")
+        expert.reset(ctx)
+        trajectories = record_rollouts(env, expert, self.config.planning_steps)
+        env.set_state_dict(saved)
+        if elapsed is not None:
+            env._elapsed_steps = elapsed
+        return trajectories
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        self.stats = EpisodeStats()
+        self._env = ctx.env
+        t0 = time.perf_counter()
+        trajectories = self.plan(ctx)
+        self.stats.planning_s = time.perf_counter() - t0
+        self.stats.planning_steps = sum(len(t) for t in trajectories)
+        self.stats.trajectories = trajectories
+        self._executors, self._locators, waypoints = [], [], []
+        for i, traj in enumerate(trajectories):
+            g = mine_grasp(traj, self.config.mining)
+            W = extract_waypoints(
+                traj.tcp_pos, g, self.config.num_waypoints, self.config.executor.grasp.lift_m
+            )
+            locator = WristLocator(ctx.env, env_index=i, config=self.config.localization)
+            self._locators.append(locator)
+            self._executors.append(WaypointExecutor(W, locator, self.config.executor))
+            waypoints.append(W)
+        self._waypoints = waypoints[0]
+
+    # ------------------------------------------------------------------ acting
+    def act(self, obs: Any) -> np.ndarray:
+        if self._env is None:
+            raise RuntimeError("GTWaypointsPolicy.act() before reset(ctx)")
+        t0 = time.perf_counter()
+        states = robot_states(self._env)
+        action = np.stack([ex.step(s) for ex, s in zip(self._executors, states, strict=True)])
+        self.stats.act_s += time.perf_counter() - t0
+        self.stats.act_calls += 1
+        self.stats.frames = sum(loc.frames for loc in self._locators)
+        self.stats.capture_s = sum(loc.capture_s for loc in self._locators)
+        self.stats.localize_s = sum(loc.localize_s for loc in self._locators)
+        return action.astype(np.float32)
+
+    @property
+    def done(self) -> bool:
+        return bool(self._executors) and all(ex.done for ex in self._executors)
+
+    @property
+    def waypoints(self) -> np.ndarray | None:
+        """The (K, 4) ground-truth waypoints of env 0 (before the pre-grasp raise)."""
+        return self._waypoints
+
+    @property
+    def executors(self) -> list[WaypointExecutor]:
+        return self._executors
+
+
+def episode_spec_for(suite: str, task: int, seed: int) -> EpisodeSpec:
+    """A spec for ad-hoc runs (benchmarks, tests) outside the harness."""
+    return EpisodeSpec(suite=suite, task=task, episode=0, seed=seed, demo_seed=seed + 1)

@@ -1,0 +1,34 @@
+"""``random``: uniform random actions in [-1, 1]^4 (the lower bound of every table)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from awda_bench.policies.base import EpisodeContext
+
+
+class RandomPolicy:
+    """``a_t ~ U[-1, 1]^4`` per env, from a generator seeded with the episode's seed."""
+
+    name = "random"
+
+    def __init__(self) -> None:
+        self._rng = np.random.default_rng(0)
+        self._num_envs = 1
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        self._rng = np.random.default_rng(ctx.spec.seed)
+        self._num_envs = int(getattr(ctx.env, "num_envs", 1))
+
+    def act(self, obs: Any) -> np.ndarray:
+        return self._rng.uniform(-1.0, 1.0, size=(self._num_envs, 4)).astype(np.float32)
+
+    @property
+    def done(self) -> bool:
+        return False
+
+    @property
+    def waypoints(self) -> np.ndarray | None:
+        return None
