@@ -33,7 +33,7 @@ def test_videos_replay_the_recorded_episodes(tmp_path: Path) -> None:
         command="t",
     )
     run_sweep(config)
-    files = record_videos(config, 1)
+    files = record_videos(config, 1, demo_source=None)
     videos = sorted(p.name for p in files if p.suffix == ".mp4")
     assert len(videos) == 4 and not any("differs" in v for v in videos)
     assert {v.split("_")[-1] for v in videos} == {"success.mp4", "failure.mp4"}

@@ -19,14 +19,15 @@ from typing import Any
 
 import numpy as np
 
+from awda_bench.harness.episode_record import EpisodeRecord
 from awda_bench.harness.episode_specs import make_protocol
 from awda_bench.harness.figures import fig_s5, project_points, write_mp4, write_png
-from awda_bench.harness.methods import get_method, select_snapshots
+from awda_bench.harness.methods import get_method, resolve, select_snapshots
 from awda_bench.harness.results_store import ResultsStore
 from awda_bench.harness.sweep import SweepConfig
 from awda_bench.harness.worker_pool import EpisodeExecutor, Job, WorkerConfig
 from awda_bench.policies.base import EpisodeSpec
-from awda_bench.suites import load_suite
+from awda_bench.suites import Suite, load_suite
 
 THIRD_PERSON = "third_person"
 """Sensor uid of the suites' third-person camera (see :mod:`awda_bench.robot.cameras`)."""
@@ -49,6 +50,30 @@ def grab_frame(env: Any) -> tuple[np.ndarray, dict[str, np.ndarray] | None]:
     return (frame[0] if frame.ndim == 4 else frame).astype(np.uint8), None
 
 
+DEMO_FRAMES = 10
+"""Demo frames shown in a Fig. S5 image (first and last included), as the method sees them."""
+
+DEFAULT_DEMO_SOURCE = "awda_bench.harness.videos:record_demo_frames"
+"""``"module:attribute"`` of ``f(suite, task, demo_seed, cache) -> list of RGB frames``."""
+
+
+def record_demo_frames(
+    suite: Suite, task: int, demo_seed: int, cache: dict[str, Any]
+) -> list[np.ndarray]:
+    """The demonstrator's video of ``(task, demo_seed)``, subsampled to :data:`DEMO_FRAMES` frames.
+
+    The demo env is built once per ``cache`` (its first camera capture costs seconds).
+    """
+    from awda_bench.demo_recording import make_demo_env, record_demo
+
+    if "demo_env" not in cache:
+        cache["demo_env"] = make_demo_env(suite)
+    frames, _ = record_demo(suite, task, demo_seed, render_every=4, env=cache["demo_env"])
+    assert frames is not None
+    index = np.linspace(0, len(frames) - 1, min(DEMO_FRAMES, len(frames))).round().astype(int)
+    return [frames[i] for i in index]
+
+
 def choose_episodes(rows: list[tuple[int, int, int]], k: int) -> list[tuple[int, int, bool]]:
     """From ``(task, episode, success)`` rows: the first ``k`` successes and failures per task."""
     chosen = []
@@ -59,12 +84,37 @@ def choose_episodes(rows: list[tuple[int, int, int]], k: int) -> list[tuple[int,
     return chosen
 
 
-def record_videos(config: SweepConfig, k: int) -> list[Path]:
-    """Replay and save the chosen episodes of the sweep ``config`` describes; returns the files."""
+def _replay(
+    executor: EpisodeExecutor, job: Job
+) -> tuple[EpisodeRecord, list[np.ndarray], dict | None]:
+    """Play ``job`` again, capturing a frame after reset and after every step."""
+    frames: list[np.ndarray] = []
+    params: list[dict[str, np.ndarray] | None] = []
+
+    def on_frame(env: Any) -> None:
+        frame, p = grab_frame(env)
+        frames.append(frame)
+        if not params:
+            params.append(p)
+
+    record = executor.play(job, on_frame=on_frame)
+    return record, frames, params[0] if params else None
+
+
+def record_videos(
+    config: SweepConfig, k: int, demo_source: str | None = DEFAULT_DEMO_SOURCE
+) -> list[Path]:
+    """Replay and save the chosen episodes of the sweep ``config`` describes; returns the files.
+
+    ``demo_source`` (``"module:attribute"``, see :data:`DEFAULT_DEMO_SOURCE`) supplies the demo
+    frames of Fig. S5 images; ``None`` draws the agent's frame alone.
+    """
     suite = load_suite(config.suite, config.suites_dir)
     protocol = make_protocol(suite, episodes=config.episodes, base_seed=config.seed)
     method = get_method(config.method)
     snapshots = select_snapshots(method, config.checkpoints, config.snapshots)
+    demo_frames = None if demo_source is None else resolve(demo_source, what="demo frame source")
+    demo_cache: dict[str, Any] = {}
     executor = EpisodeExecutor(
         WorkerConfig(
             suite_name=suite.name,
@@ -83,68 +133,55 @@ def record_videos(config: SweepConfig, k: int) -> list[Path]:
                     (protocol.fingerprint, method.name, snap.sha256),
                 )
                 seeds = {(r[0], r[1]): (r[3], r[4]) for r in rows}
+                directory = (
+                    config.out / "videos" / suite.name / method.name.replace(":", "_") / snap.sha256
+                )
                 for task, episode, success in choose_episodes([r[:3] for r in rows], k):
                     seed, demo_seed = seeds[(task, episode)]
-                    spec = EpisodeSpec(
-                        suite=suite.name, task=task, episode=episode, seed=seed, demo_seed=demo_seed
-                    )
-                    frames: list[np.ndarray] = []
-                    params: list[dict[str, np.ndarray] | None] = []
-
-                    def on_frame(env: Any, frames: list = frames, params: list = params) -> None:
-                        frame, p = grab_frame(env)
-                        frames.append(frame)
-                        if not params:
-                            params.append(p)
-
-                    extras: dict[str, Any] = {}
-                    record = executor.play(
-                        Job(spec=spec, method=method, snapshot=snap),
-                        on_frame=on_frame,
-                        extras=extras,
-                    )
+                    spec = EpisodeSpec(suite.name, task, episode, seed, demo_seed)
+                    job = Job(spec=spec, method=method, snapshot=snap)
+                    record, frames, params = _replay(executor, job)
+                    name = f"task {task} episode {episode}"
                     if record.status != "ok":
-                        print(
-                            f"warning: replay of task {task} episode {episode} failed: "
-                            f"{(record.error or '').strip().splitlines()[-1]}",
-                            file=sys.stderr,
-                        )
+                        last = (record.error or "").strip().splitlines()[-1:]
+                        print(f"warning: replay of {name} failed: {last}", file=sys.stderr)
                         continue
                     stem = f"task{task}_ep{episode}_{'success' if success else 'failure'}"
                     if bool(record.success_once) != success:
                         stem += "_replay-differs"
-                        print(
-                            f"warning: replay of task {task} episode {episode} changed outcome",
-                            file=sys.stderr,
+                        print(f"warning: replay of {name} changed outcome", file=sys.stderr)
+                    fps = suite.control_freq_hz
+                    written.append(write_mp4(frames, directory / f"{stem}.mp4", fps=fps))
+                    if record.waypoints and params is not None:
+                        demo = (
+                            []
+                            if demo_frames is None
+                            else demo_frames(suite, task, demo_seed, demo_cache)
                         )
-                    directory = (
-                        config.out
-                        / "videos"
-                        / suite.name
-                        / method.name.replace(":", "_")
-                        / snap.sha256
-                    )
-                    written.append(
-                        write_mp4(frames, directory / f"{stem}.mp4", fps=suite.control_freq_hz)
-                    )
-                    if record.waypoints and params and params[0] is not None:
-                        wp = np.asarray(record.waypoints, dtype=float)
-                        pixels = project_points(
-                            wp[:, :3], params[0]["intrinsic_cv"], params[0]["extrinsic_cv"]
-                        )
-                        grasp = (
-                            [bool(g > 0.5) for g in wp[:, 3]]
-                            if wp.shape[1] > 3
-                            else [False] * len(wp)
-                        )
-                        demo = [
-                            np.asarray(f) for f in extras.get("demo_frames", [])
-                        ]  # none until a policy provides them
-                        image = fig_s5(demo, frames[0], pixels, grasp)
-                        written.append(write_png(image, directory / f"{stem}_waypoints.png"))
-                        (directory / f"{stem}_waypoints.json").write_text(
-                            json.dumps(record.waypoints)
+                        written += _waypoint_figure(
+                            record.waypoints, frames[0], params, demo, directory / stem
                         )
     finally:
         executor.close()
+        if "demo_env" in demo_cache:
+            demo_cache["demo_env"].close()
     return written
+
+
+def _waypoint_figure(
+    waypoints: list[list[float]],
+    first_frame: np.ndarray,
+    params: dict[str, np.ndarray],
+    demo: list[np.ndarray],
+    stem: Path,
+) -> list[Path]:
+    """Fig. S5-style PNG (+ the waypoints as JSON) for one episode."""
+    wp = np.asarray(waypoints, dtype=float)
+    pixels = project_points(wp[:, :3], params["intrinsic_cv"], params["extrinsic_cv"])
+    grasp = [bool(g > 0.5) for g in wp[:, 3]] if wp.shape[1] > 3 else [False] * len(wp)
+    png = write_png(
+        fig_s5(demo, first_frame, pixels, grasp), stem.with_name(stem.name + "_waypoints.png")
+    )
+    js = stem.with_name(stem.name + "_waypoints.json")
+    js.write_text(json.dumps(waypoints))
+    return [png, js]
