@@ -147,7 +147,7 @@ class AwdaDemonstrator(FloatingPandaGripper):
     keyframes = dict(
         rest=Keyframe(
             # root x, y, z [m]; root rotations x, y, z [rad] (y = pi: pointing down); fingers [m]
-            qpos=np.array([-0.10, 0.0, 0.35 + TCP_BELOW_ROOT_M, 0.0, np.pi, 0.0, 0.04, 0.04]),
+            qpos=np.array([-0.10, 0.0, 0.28 + TCP_BELOW_ROOT_M, 0.0, np.pi, 0.0, 0.04, 0.04]),
             pose=sapien.Pose(),
         )
     )
