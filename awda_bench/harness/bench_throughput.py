@@ -5,8 +5,10 @@ Each worker count runs the same sweep into its own temporary store. Definitions:
 
     episodes/min          = episodes / sweep wall time * 60         (worker start-up included)
     steady episodes/min   = episodes / (wall - start-up) * 60
-    harness overhead      = 1 - sum(episode wall) / (workers * (wall - start-up))
-                            (scheduling, IPC, store commits, idle tail: everything outside episodes)
+    harness overhead      = 1 - (sum(episode wall) + sum(policy build))
+                              / (workers * (wall - start-up))
+                            (scheduling, IPC, store commits, idle tail: everything outside episodes;
+                            building the policy once per worker counts as start-up, not overhead)
     in-episode overhead   = sum(episode wall - policy time - env time) / sum(episode wall)
 """
 
@@ -63,7 +65,8 @@ def describe(workers: int, r: SweepResult) -> dict[str, float]:
         "episodes_per_min": r.ran / r.wall_time_s * 60,
         "steady_episodes_per_min": r.ran / busy * 60,
         "mean_episode_s": r.episode_time_s / max(r.ran, 1),
-        "harness_overhead": 1 - r.episode_time_s / (max(workers, 1) * busy),
+        "harness_overhead": 1 - (r.episode_time_s + r.setup_time_s) / (max(workers, 1) * busy),
+        "policy_build_s": r.setup_time_s,
         "in_episode_overhead": (r.episode_time_s - r.act_time_s - r.env_time_s)
         / max(r.episode_time_s, 1e-9),
     }

@@ -53,6 +53,9 @@ class EpisodeRecord:
     """Traceback or watchdog message when ``status == "error"``."""
     waypoints: list[list[float]] | None = None
     """Attributed waypoints ``(K, 3 + k)`` the method predicted, if it predicts any."""
+    setup_time_s: float = 0.0
+    """Time spent building the policy just before this episode (a worker's first episode of a
+    snapshot) [s]; not part of :attr:`wall_time_s`, not stored (throughput accounting only)."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -127,6 +127,8 @@ class SweepResult:
     """Sum over played episodes of time in ``policy.reset``/``policy.act`` [s]."""
     env_time_s: float = 0.0
     """Sum over played episodes of time in ``env.reset``/``env.step`` [s]."""
+    setup_time_s: float = 0.0
+    """Sum of policy construction times in the workers [s] (not part of episode time)."""
 
 
 def prepare_sweep(config: SweepConfig) -> SweepPlan:
@@ -185,7 +187,7 @@ def run_sweep(config: SweepConfig) -> SweepResult:
         )[0]
         counts = {"ok": int(done_ok[0]), "success": int(done_ok[1]), "errors": 0, "ran": 0}
         episode_time = 0.0
-        inner = {"act": 0.0, "env": 0.0}
+        inner = {"act": 0.0, "env": 0.0, "setup": 0.0}
         bar = tqdm(
             total=len(plan.jobs),
             initial=skipped,
@@ -202,6 +204,7 @@ def run_sweep(config: SweepConfig) -> SweepResult:
             episode_time += record.wall_time_s
             inner["act"] += record.act_time_s
             inner["env"] += record.env_time_s
+            inner["setup"] += record.setup_time_s
             if record.status == STATUS_OK:
                 counts["ok"] += 1
                 counts["success"] += int(bool(record.success_once))
@@ -243,4 +246,5 @@ def run_sweep(config: SweepConfig) -> SweepResult:
         startup_s=startup,
         act_time_s=inner["act"],
         env_time_s=inner["env"],
+        setup_time_s=inner["setup"],
     )

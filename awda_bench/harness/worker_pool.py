@@ -108,13 +108,15 @@ class EpisodeExecutor:
         self, job: Job, on_frame: FrameHook | None = None, extras: dict[str, Any] | None = None
     ) -> EpisodeRecord:
         t0 = time.perf_counter()
+        setup = 0.0
         try:
             key = (job.method.name, job.snapshot.sha256)
             if self._policy is None or self._policy_key != key:
                 self._policy, self._policy_key = None, None
                 self._policy = make_policy(job.method, job.snapshot)
                 self._policy_key = key
-            return run_episode(
+                setup = time.perf_counter() - t0
+            record = run_episode(
                 self.env,
                 self._policy,
                 job.spec,
@@ -124,6 +126,7 @@ class EpisodeExecutor:
                 on_frame=on_frame,
                 extras=extras,
             )
+            return replace(record, setup_time_s=setup)
         except Exception:  # recorded with its traceback; the sweep goes on
             family = self.suite.task(job.spec.task).family
             return error_record(job, family, traceback.format_exc(), time.perf_counter() - t0)
@@ -308,6 +311,6 @@ def run_inline(
     executor = EpisodeExecutor(config)
     try:
         for job in jobs:
-            on_result(replace(executor.play(job)))
+            on_result(executor.play(job))
     finally:
         executor.close()
