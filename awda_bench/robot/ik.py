@@ -111,9 +111,15 @@ class PandaIK:
         return self._iterate(np.asarray(target_pos, dtype=np.float64))
 
     def solve_delta(
-        self, qpos: np.ndarray, delta_m: np.ndarray, low_m: np.ndarray, high_m: np.ndarray
+        self,
+        qpos: np.ndarray,
+        delta_m: np.ndarray,
+        low_m: np.ndarray,
+        high_m: np.ndarray,
+        max_reach_xy_m: float = np.inf,
     ) -> tuple[np.ndarray, np.ndarray, float]:
-        """Move the TCP by ``delta_m`` (3,) from where ``qpos`` puts it, clipped to ``[low_m, high_m]``.
+        """Move the TCP by ``delta_m`` (3,) from where ``qpos`` puts it, clipped to ``[low_m, high_m]``
+        and to ``max_reach_xy_m`` horizontal distance from the base axis.
 
         One forward-kinematics pass serves both the current TCP and the first IK iteration.
         Returns ``(q_arm, target_pos, error_m)``, all in the base frame.
@@ -121,6 +127,9 @@ class PandaIK:
         self.configuration.update(self._full_qpos(qpos))
         current = self.configuration.data.site(TCP_SITE).xpos
         target = np.clip(current + delta_m, low_m, high_m)
+        radius = float(np.hypot(target[0], target[1]))
+        if radius > max_reach_xy_m:
+            target[:2] *= max_reach_xy_m / radius
         q_arm, error = self._iterate(target)
         return q_arm, target, error
 
