@@ -79,7 +79,8 @@ def record_demo(
 
     ``frames`` is ``(F, H, W, 3)`` uint8 (steps listed in ``trajectory.meta["frame_steps"]``) or
     None when ``frames=False``. ``env`` (from :func:`make_demo_env`, same suite and embodiment) is
-    reused when given. The episode ends ``SETTLE_STEPS`` after the expert is done, or at the horizon.
+    reused when given. The episode ends ``SETTLE_STEPS`` after the expert is done, or at the
+    horizon.
     """
     if isinstance(suite, str):
         suite = load_suite(suite)
@@ -153,7 +154,7 @@ def save_video(frames: np.ndarray, path: str | Path, fps: float) -> Path:
         raise UsageError(f"frames must be (F, H, W, 3) with F >= 1, got {frames.shape}")
     path.parent.mkdir(parents=True, exist_ok=True)
     height, width = frames.shape[1:3]
-    writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*"mp4v"), fps, (width, height))
+    writer = cv2.VideoWriter(str(path), cv2.VideoWriter.fourcc(*"mp4v"), fps, (width, height))
     if not writer.isOpened():
         raise UsageError(f"cannot open {path} for writing an MP4 video")
     try:

@@ -1,4 +1,4 @@
-"""AWDA-PickPlace-v1: geometry helpers (fast) and the checks ManiSkill applies to its own envs (slow)."""
+"""AWDA-PickPlace-v1: geometry helpers (fast), the checks ManiSkill applies to its envs (slow)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""``python -m awda_bench demo``: record one scripted demonstration as an MP4 plus a trajectory ``.npz``."""
+"""``python -m awda_bench demo``: record one scripted demonstration (MP4 + trajectory ``.npz``)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         "demo",
         help="record a scripted demonstration (video + per-step states)",
         description="Run the scripted expert of a suite task and save third-person frames as MP4 "
-        "and, next to it, the per-step trajectory (TCP, gripper opening, actions, grasp truth) as .npz.",
+        "and, next to it, the per-step trajectory (TCP, gripper opening, actions, grasp truth) "
+        "as .npz.",
     )
     parser.add_argument("--suite", default="pick_place", help="suite name (tasks/<name>.toml)")
     parser.add_argument("--task", type=int, required=True, help="task index within the suite")
@@ -21,7 +22,10 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser.add_argument("--embodiment", choices=EMBODIMENT_NAMES, default="demonstrator")
     parser.add_argument("--out", type=Path, required=True, help="output video path (.mp4)")
     parser.add_argument(
-        "--render-every", type=int, default=2, help="render every k-th control step (video fps = control rate / k)"
+        "--render-every",
+        type=int,
+        default=2,
+        help="render every k-th control step (video fps = control rate / k)",
     )
     return parser
 

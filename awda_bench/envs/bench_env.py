@@ -14,6 +14,7 @@ import argparse
 import csv
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -24,11 +25,21 @@ def add_env_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--suite", default="pick_place", help="suite name (tasks/<name>.toml)")
     parser.add_argument("--embodiment", choices=EMBODIMENT_NAMES, default="agent")
     parser.add_argument("--task", type=int, default=0, help="task of the speed episodes")
-    parser.add_argument("--episodes", type=int, default=3, help="expert episodes timed (state only)")
-    parser.add_argument("--frames", type=int, default=10, help="third-person captures timed after the first")
-    parser.add_argument("--sweep-seeds", type=int, default=0, help="expert success sweep: seeds per task (0: none)")
-    parser.add_argument("--sweep-tasks", default="all", help="comma-separated task indices of the sweep, or 'all'")
-    parser.add_argument("--sweep-csv", type=Path, default=None, help="write one row per sweep episode here")
+    parser.add_argument(
+        "--episodes", type=int, default=3, help="expert episodes timed (state only)"
+    )
+    parser.add_argument(
+        "--frames", type=int, default=10, help="third-person captures timed after the first"
+    )
+    parser.add_argument(
+        "--sweep-seeds", type=int, default=0, help="expert success sweep: seeds per task (0: none)"
+    )
+    parser.add_argument(
+        "--sweep-tasks", default="all", help="comma-separated task indices of the sweep, or 'all'"
+    )
+    parser.add_argument(
+        "--sweep-csv", type=Path, default=None, help="write one row per sweep episode here"
+    )
 
 
 def _time_expert(env, suite, task: int, episodes: int) -> tuple[int, float, float]:
@@ -39,7 +50,9 @@ def _time_expert(env, suite, task: int, episodes: int) -> tuple[int, float, floa
     base = env.unwrapped
     steps, total, in_step = 0, 0.0, 0.0
     for seed in range(episodes):
-        expert = make_expert(suite.name, "agent" if base.robot_uids == "panda_awda" else "demonstrator")
+        expert = make_expert(
+            suite.name, "agent" if base.robot_uids == "panda_awda" else "demonstrator"
+        )
         obs, _ = env.reset(seed=seed, options={"task": task})
         expert.reset(EpisodeContext(env=base, spec=EpisodeSpec(suite.name, task, seed, seed, seed)))
         start = time.perf_counter()
@@ -65,12 +78,16 @@ def run_env_bench(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     env = make_demo_env(suite, args.embodiment)
     env.reset(seed=0, options={"task": args.task})
-    print(f"env {suite.env_id} robot={env.unwrapped.robot_uids}: make + first reset {time.perf_counter() - t0:.2f} s")
+    print(
+        f"env {suite.env_id} robot={env.unwrapped.robot_uids}: "
+        f"make + first reset {time.perf_counter() - t0:.2f} s"
+    )
 
     steps, total, in_step = _time_expert(env, suite, args.task, args.episodes)
     print(
         f"expert, state only: {steps} steps in {total:.2f} s -> {steps / total:.1f} env steps/s "
-        f"(env.step alone {steps / in_step:.1f} steps/s; {args.episodes} episodes of task {args.task})"
+        f"(env.step alone {steps / in_step:.1f} steps/s; "
+        f"{args.episodes} episodes of task {args.task})"
     )
 
     t0 = time.perf_counter()
@@ -94,22 +111,38 @@ def run_env_bench(args: argparse.Namespace) -> int:
             if args.sweep_tasks == "all"
             else [int(x) for x in args.sweep_tasks.split(",")]
         )
-        rows = []
-        print(f"expert sweep ({args.embodiment}): seeds 0..{args.sweep_seeds - 1} per task", flush=True)
+        rows: list[dict[str, Any]] = []
+        print(
+            f"expert sweep ({args.embodiment}): seeds 0..{args.sweep_seeds - 1} per task",
+            flush=True,
+        )
         print("task  success  reached  grasped  mean_steps  max_steps", flush=True)
         for task in tasks:
-            per_task = []
+            per_task: list[dict[str, Any]] = []
             for seed in range(args.sweep_seeds):
                 _, traj = record_demo(suite, task, seed, args.embodiment, frames=False, env=env)
                 m = traj.meta
-                row = {k: m[k] for k in ("task", "seed", "embodiment", "success", "success_once", "reached", "grasped", "steps")}
+                row = {
+                    k: m[k]
+                    for k in (
+                        "task",
+                        "seed",
+                        "embodiment",
+                        "success",
+                        "success_once",
+                        "reached",
+                        "grasped",
+                        "steps",
+                    )
+                }
                 per_task.append(row)
                 rows.append(row)
             n = len(per_task)
             steps_t = [r["steps"] for r in per_task]
             print(
                 f"{task:4d}  {sum(r['success'] for r in per_task):3d}/{n:<3d}  "
-                f"{sum(r['reached'] for r in per_task):3d}/{n:<3d}  {sum(r['grasped'] for r in per_task):3d}/{n:<3d}  "
+                f"{sum(r['reached'] for r in per_task):3d}/{n:<3d}  "
+                f"{sum(r['grasped'] for r in per_task):3d}/{n:<3d}  "
                 f"{np.mean(steps_t):10.1f}  {max(steps_t):9d}",
                 flush=True,
             )

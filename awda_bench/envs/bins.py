@@ -11,7 +11,7 @@ from mani_skill.utils.structs.actor import Actor
 
 @dataclass(frozen=True)
 class BinSpec:
-    """An open box standing on the table, optionally split into 2 x 2 compartments by a cross divider."""
+    """An open box on the table, optionally split into 2 x 2 compartments by a cross divider."""
 
     center_xy_m: tuple[float, float]
     """Centre of the bin in the world [m]."""

@@ -1,7 +1,8 @@
-"""What a task needs to know about each robot that can act in it, as data (no robot branches in tasks).
+"""What a task needs to know about each robot acting in it, as data (no robot branches in tasks).
 
 Every embodiment acts through the same 4-D action (dx, dy, dz, grip) in [-1, 1]; the table below
-records, per ManiSkill agent uid, the control mode providing it, how far a unit action moves the TCP,
+records, per ManiSkill agent uid, the control mode providing it, how far a unit action moves the
+TCP,
 which sign of ``action[3]`` closes the gripper, and where the robot starts.
 """
 
@@ -40,7 +41,7 @@ class Embodiment:
         return action[:, 3] > 0 if self.close_when_positive else action[:, 3] < 0
 
     def to_env_action(self, action: np.ndarray) -> np.ndarray:
-        """Map the method's action (grip > 0 closes) to this robot's action (same array if identical)."""
+        """Map the method's action (grip > 0 closes) to this robot's (same array if identical)."""
         if self.close_when_positive:
             return action
         out = np.array(action, dtype=np.float32, copy=True)

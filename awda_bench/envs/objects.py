@@ -1,4 +1,4 @@
-"""The four pick-and-place objects of SPEC §3.1 (primitive shapes, distinct colours) and geometry helpers."""
+"""The four pick-and-place objects of SPEC §3.1 (primitives, distinct colours), geometry helpers."""
 
 from __future__ import annotations
 
@@ -30,7 +30,9 @@ class ObjectSpec:
         if self.shape not in ("box", "cylinder"):
             raise ValueError(f"shape must be 'box' or 'cylinder', got {self.shape!r}")
         if self.shape == "cylinder" and self.size_m[0] != self.size_m[1]:
-            raise ValueError(f"cylinder {self.name!r} needs equal x and y extents, got {self.size_m}")
+            raise ValueError(
+                f"cylinder {self.name!r} needs equal x and y extents, got {self.size_m}"
+            )
 
     @property
     def half_height_m(self) -> float:
@@ -47,11 +49,17 @@ class ObjectSpec:
 
 PICK_PLACE_OBJECTS: tuple[ObjectSpec, ...] = (
     ObjectSpec(name="milk", shape="box", size_m=(0.04, 0.04, 0.14), color=(0.95, 0.95, 0.95, 1.0)),
-    ObjectSpec(name="bread", shape="box", size_m=(0.035, 0.035, 0.05), color=(0.80, 0.52, 0.22, 1.0)),
-    ObjectSpec(name="cereal", shape="box", size_m=(0.035, 0.025, 0.054), color=(0.95, 0.85, 0.10, 1.0)),
-    ObjectSpec(name="can", shape="cylinder", size_m=(0.05, 0.05, 0.08), color=(0.85, 0.10, 0.10, 1.0)),
+    ObjectSpec(
+        name="bread", shape="box", size_m=(0.035, 0.035, 0.05), color=(0.80, 0.52, 0.22, 1.0)
+    ),
+    ObjectSpec(
+        name="cereal", shape="box", size_m=(0.035, 0.025, 0.054), color=(0.95, 0.85, 0.10, 1.0)
+    ),
+    ObjectSpec(
+        name="can", shape="cylinder", size_m=(0.05, 0.05, 0.08), color=(0.85, 0.10, 0.10, 1.0)
+    ),
 )
-"""Object ``i`` is the target of tasks ``4 i .. 4 i + 3`` (milk carton, bread, cereal box, soda can)."""
+"""Object ``i`` is the target of tasks ``4 i .. 4 i + 3`` (milk carton, bread, cereal, soda can)."""
 
 _CYLINDER_UP = sapien.Pose(q=[np.sqrt(0.5), 0.0, np.sqrt(0.5), 0.0])
 """SAPIEN cylinders lie along x; this turns their axis to z."""
@@ -78,7 +86,10 @@ def build_object(scene: ManiSkillScene, spec: ObjectSpec, initial_z_m: float) ->
 
 
 def distance_to_objects(
-    points: torch.Tensor, positions: torch.Tensor, quats: torch.Tensor, specs: tuple[ObjectSpec, ...]
+    points: torch.Tensor,
+    positions: torch.Tensor,
+    quats: torch.Tensor,
+    specs: tuple[ObjectSpec, ...],
 ) -> torch.Tensor:
     """Euclidean distance [m] from ``points`` (n, 3) to the surface of each object (0 inside).
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -18,7 +18,12 @@ from mani_skill.utils.structs.types import SimConfig
 
 from awda_bench.envs.bins import BinSpec, build_bin
 from awda_bench.envs.embodiments import AGENT_UID, EMBODIMENTS, embodiment
-from awda_bench.envs.objects import PICK_PLACE_OBJECTS, ObjectSpec, build_object, distance_to_objects
+from awda_bench.envs.objects import (
+    PICK_PLACE_OBJECTS,
+    ObjectSpec,
+    build_object,
+    distance_to_objects,
+)
 from awda_bench.errors import UsageError
 
 NUM_TASKS = 16
@@ -27,7 +32,7 @@ NUM_TASKS = 16
 
 @dataclass(frozen=True)
 class PickPlaceLayout:
-    """Geometry of the pick-and-place scene (world frame: table top at z = 0, robot base at x = -0.615)."""
+    """Geometry of the pick-and-place scene (world: table top z = 0, robot base x = -0.615)."""
 
     source_bin: BinSpec = BinSpec(
         center_xy_m=(-0.08, -0.20), inner_half_size_m=(0.14, 0.17), wall_height_m=0.05
@@ -42,8 +47,9 @@ class PickPlaceLayout:
     )
     """The bin with 4 compartments (see :meth:`BinSpec.compartment_box` for the numbering)."""
     spawn_half_size_m: tuple[float, float] = (0.10, 0.11)
-    """Object centres are drawn uniformly in source-bin centre +- this [m] (reference: 0.125 x 0.155,
-    shrunk so every layout stays in the Panda's top-down reach and the open fingers clear the walls)."""
+    """Object centres are drawn uniformly in source-bin centre +- this [m] (reference: 0.125 x
+    0.155, shrunk so every layout stays in the Panda's top-down reach and the open fingers clear
+    the walls)."""
     min_separation_m: float = 0.12
     """Minimum distance between any two object centres [m]."""
     layout_candidates: int = 4096
@@ -51,7 +57,7 @@ class PickPlaceLayout:
     success_max_height_m: float = 0.10
     """Success: the target's centre at most this far above the compartment floor [m]."""
     reach_threshold_m: float = 0.04
-    """Reached: TCP within this distance of the target object's surface before any grasp attempt [m]."""
+    """Reached: TCP within this distance of the target's surface before any grasp attempt [m]."""
     lift_threshold_m: float = 0.05
     """Grasped: after reaching, the target raised at least this much above its start height [m]."""
     third_person_eye_m: tuple[float, float, float] = (0.32, 0.0, 0.68)
@@ -71,9 +77,10 @@ class PickPlaceEnv(BaseEnv):
     """
     **Task Description:**
     Pick the target object out of the source bin and put it into one of the 4 compartments of the
-    target bin. Four objects are always present (milk carton, bread, cereal box, soda can); the three
-    non-targets are distractors. ``reset(options={"task": i})`` selects object ``i // 4`` and
-    compartment ``i % 4`` (per env: an int or an (n,) sequence; default 0; kept until the next reset).
+    target bin. Four objects are always present (milk carton, bread, cereal box, soda can); the
+    three non-targets are distractors. ``reset(options={"task": i})`` selects object ``i // 4``
+    and compartment ``i % 4`` (per env: an int or an (n,) sequence; default 0; kept until the
+    next reset).
 
     **Randomizations:**
     - the four object centres are drawn uniformly in the source bin's spawn area
@@ -84,9 +91,9 @@ class PickPlaceEnv(BaseEnv):
     **Success Conditions:**
     - the target object's centre is inside its compartment's inner x/y box and at most
       ``success_max_height_m`` above the compartment floor
-    - grasp analysis (latched over the episode): ``reached`` = TCP within ``reach_threshold_m`` of the
-      target's surface before the gripper was first commanded closed; ``grasped`` = reached, then the
-      target raised at least ``lift_threshold_m`` above its start height
+    - grasp analysis (latched over the episode): ``reached`` = TCP within ``reach_threshold_m``
+      of the target's surface before the gripper was first commanded closed; ``grasped`` =
+      reached, then the target raised at least ``lift_threshold_m`` above its start height
     """
 
     SUPPORTED_ROBOTS = list(EMBODIMENTS)
@@ -114,7 +121,9 @@ class PickPlaceEnv(BaseEnv):
         lay = self.layout
         return CameraConfig(
             uid=uid,
-            pose=sapien_utils.look_at(eye=list(lay.third_person_eye_m), target=list(lay.third_person_target_m)),
+            pose=sapien_utils.look_at(
+                eye=list(lay.third_person_eye_m), target=list(lay.third_person_target_m)
+            ),
             width=lay.camera_width_px,
             height=lay.camera_height_px,
             fov=lay.third_person_fov_rad,
@@ -140,7 +149,9 @@ class PickPlaceEnv(BaseEnv):
         self.source_bin = build_bin(self.scene, self.layout.source_bin, name="source_bin")
         self.target_bin = build_bin(self.scene, self.layout.target_bin, name="target_bin")
         floor = self.layout.source_bin.floor_z_m
-        self.objects = [build_object(self.scene, s, floor + s.half_height_m) for s in self.objects_spec]
+        self.objects = [
+            build_object(self.scene, s, floor + s.half_height_m) for s in self.objects_spec
+        ]
         boxes = [self.layout.target_bin.compartment_box(c) for c in range(4)]
         self._compartment_lo = torch.tensor(
             [[b[0][0], b[1][0]] for b in boxes], dtype=torch.float32, device=self.device
@@ -263,7 +274,7 @@ class PickPlaceEnv(BaseEnv):
         return qpos[:, -2] + qpos[:, -1]
 
     def is_grasping_target(self) -> torch.Tensor:
-        """(n,) simulator truth: both fingers press on the target object (Panda's contact-force test)."""
+        """(n,) simulator truth: both fingers press on the target (Panda's contact-force test)."""
         idx = self.target_object_index
         out = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
         for j in torch.unique(idx).tolist():
@@ -274,7 +285,9 @@ class PickPlaceEnv(BaseEnv):
     def _step_action(self, action: Any) -> Any:
         # latch "reached" on the state *before* this action, and the grasp attempt on the action
         if action is not None and not isinstance(action, dict):
-            a = torch.as_tensor(np.asarray(action) if not isinstance(action, torch.Tensor) else action)
+            a = torch.as_tensor(
+                np.asarray(action) if not isinstance(action, torch.Tensor) else action
+            )
             a = a.to(self.device).reshape(self.num_envs, -1)
             self._latch_reached()
             self.grip_attempted |= self.embodiment.grip_closed(a.float())
@@ -335,11 +348,13 @@ class PickPlaceEnv(BaseEnv):
     """Per-env task attributes saved beside the scene state."""
 
     def get_state_dict(self) -> dict:
-        """Scene state plus the per-env task and latched flags under ``"task_state"`` ((n, 1) floats,
+        """Scene state plus the per-env task and latched flags under ``"task_state"`` ((n, 1)
+        floats,
         so :meth:`get_state` can flatten them; :meth:`set_state` restores the scene only)."""
         state = super().get_state_dict()
         state["task_state"] = {
-            name: getattr(self, name).to(torch.float32)[:, None].clone() for name in self._TASK_STATE
+            name: getattr(self, name).to(torch.float32)[:, None].clone()
+            for name in self._TASK_STATE
         }
         return state
 

@@ -1,4 +1,4 @@
-"""Scripted experts (privileged state, 4-D actions): the ``scripted`` method and the demonstrators."""
+"""Scripted experts (privileged state, 4-D actions): the ``scripted`` method, the demonstrators."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ EXPERT_SUITES = ("pick_place",)
 
 
 def make_expert(suite: str, embodiment: str = "agent") -> Policy:
-    """A fresh scripted expert for ``suite`` driving ``embodiment`` (``"agent"`` or ``"demonstrator"``).
+    """A fresh scripted expert for ``suite`` driving ``embodiment`` (agent or demonstrator).
 
     Both embodiments carry a Panda hand, so they share the grasp settings; the step size and grip
     sign come from the env the expert is reset in.

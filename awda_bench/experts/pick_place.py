@@ -2,7 +2,7 @@
 
 Phases per env (each moves the TCP in a straight line, at most ``max_step_m`` per axis per step)::
 
-    HOVER ---> DESCEND ---> CLOSE ---> LIFT ---> CARRY ---> LOWER ---> RELEASE ---> RETREAT ---> DONE
+    HOVER --> DESCEND --> CLOSE --> LIFT --> CARRY --> LOWER --> RELEASE --> RETREAT --> DONE
     above the  to grasp     grip       straight  above the  object     grip        straight
     target     height       closed     up        compartment ~floor    open        up
 
@@ -129,7 +129,9 @@ class PickPlaceExpert:
         half_h = np.array([env.objects_spec[i].half_height_m for i in obj_idx])
         goal_xy = env.compartment_center().cpu().numpy()[:, :2].astype(np.float64)
         floor = env.layout.target_bin.floor_z_m
-        walls = max(b.floor_z_m + b.wall_height_m for b in (env.layout.source_bin, env.layout.target_bin))
+        walls = max(
+            b.floor_z_m + b.wall_height_m for b in (env.layout.source_bin, env.layout.target_bin)
+        )
 
         top = obj_pos[:, 2] + half_h
         grasp_z = np.maximum(top - cfg.grasp_depth_m, obj_pos[:, 2])
@@ -138,7 +140,9 @@ class PickPlaceExpert:
 
         goal = tcp.copy()
         for i in range(len(tcp)):
-            self._advance(i, tcp[i], obj_pos[i], grasp_z[i], hover_z[i], goal_xy[i], bottom[i], floor, walls)
+            self._advance(
+                i, tcp[i], obj_pos[i], grasp_z[i], hover_z[i], goal_xy[i], bottom[i], floor, walls
+            )
             phase = Phase(self.phase[i])
             if phase == Phase.HOVER:
                 goal[i] = (obj_pos[i, 0], obj_pos[i, 1], hover_z[i])
@@ -178,7 +182,7 @@ class PickPlaceExpert:
         floor: float,
         walls: float,
     ) -> None:
-        """Move env ``i`` to its next phase if the current one is finished (at most one per step)."""
+        """Move env ``i`` to its next phase once the current one is finished (one per step)."""
         cfg = self.config
         phase = Phase(self.phase[i])
         steps = self.phase_steps[i]
@@ -187,15 +191,21 @@ class PickPlaceExpert:
         goal_xy_err = float(np.linalg.norm(tcp[:2] - goal_xy))
         nxt = phase
         if phase == Phase.HOVER:
-            if (xy_err <= cfg.xy_tolerance_m and abs(tcp[2] - hover_z) <= 2 * cfg.z_tolerance_m) or over_budget:
+            if (
+                xy_err <= cfg.xy_tolerance_m and abs(tcp[2] - hover_z) <= 2 * cfg.z_tolerance_m
+            ) or over_budget:
                 nxt = Phase.DESCEND
         elif phase == Phase.DESCEND:
-            if (abs(tcp[2] - grasp_z) <= cfg.z_tolerance_m and xy_err <= 2 * cfg.xy_tolerance_m) or over_budget:
+            if (
+                abs(tcp[2] - grasp_z) <= cfg.z_tolerance_m and xy_err <= 2 * cfg.xy_tolerance_m
+            ) or over_budget:
                 nxt = Phase.CLOSE
         elif phase == Phase.CLOSE:
             if steps >= cfg.close_steps:
                 nxt = Phase.LIFT
-                self._carry_z[i] = max(cfg.min_carry_z_m, walls + (tcp[2] - bottom) + cfg.carry_clearance_m)
+                self._carry_z[i] = max(
+                    cfg.min_carry_z_m, walls + (tcp[2] - bottom) + cfg.carry_clearance_m
+                )
         elif phase == Phase.LIFT:
             if tcp[2] >= self._carry_z[i] - 2 * cfg.z_tolerance_m or over_budget:
                 nxt = Phase.CARRY

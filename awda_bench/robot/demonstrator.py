@@ -1,7 +1,8 @@
-"""The demonstrator embodiment: a floating Panda hand, recoloured, with the agent's 4-D action space.
+"""The demonstrator embodiment: a floating Panda hand, recoloured, with the agent's 4-D actions.
 
 The demo videos a one-shot policy watches must come from an embodiment that *looks different* from
-the agent (the references used a Sawyer demonstrator for a Panda agent). Only robot assets shipped in
+the agent (the references used a Sawyer demonstrator for a Panda agent). Only robot assets shipped
+in
 the ``mani-skill`` wheel may be used, so the demonstrator is ManiSkill's ``floating_panda_gripper``
 (``panda_v2_gripper.urdf``: a Panda hand on six virtual root joints, no arm), painted a dark blue so
 it is distinguishable from the white Panda arm at a glance, with gravity disabled on its links (it
@@ -55,6 +56,7 @@ class FloatingDeltaPosController(PDJointPosController):
     """TCP position deltas in [-1, 1]^3 on a floating hand's six root joints (rotation held)."""
 
     config: FloatingDeltaPosControllerConfig
+    _target_qpos: torch.Tensor
 
     def _initialize_action_space(self) -> None:
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
@@ -64,7 +66,9 @@ class FloatingDeltaPosController(PDJointPosController):
         self._step = 0
         self._start_qpos = self.qpos
         low = torch.as_tensor(self.config.workspace_low_m, dtype=commands.dtype, device=self.device)
-        high = torch.as_tensor(self.config.workspace_high_m, dtype=commands.dtype, device=self.device)
+        high = torch.as_tensor(
+            self.config.workspace_high_m, dtype=commands.dtype, device=self.device
+        )
         target = self._target_qpos.clone()
         target[:, :3] = torch.clamp(self.qpos[:, :3] + commands * self.config.max_step_m, low, high)
         self._target_qpos = target
@@ -85,9 +89,9 @@ class FloatingDeltaPosControllerConfig(PDJointPosControllerConfig):
     """
 
     max_step_m: float = 0.02
-    """TCP displacement commanded by a unit action component in one control step [m] (the agent's)."""
+    """TCP displacement of a unit action component in one control step [m] (as the agent's)."""
     workspace_low_m: tuple[float, float, float] = (-0.45, -0.55, 0.11)
-    """Lower corner of the box root-joint targets are clipped to [m] (z: TCP 0.7 cm above the table)."""
+    """Lower corner of the box root-joint targets are clipped to [m] (z: TCP 0.7 cm above table)."""
     workspace_high_m: tuple[float, float, float] = (0.30, 0.55, 0.80)
     """Upper corner of that box [m]."""
     normalize_action: bool = False
@@ -96,9 +100,12 @@ class FloatingDeltaPosControllerConfig(PDJointPosControllerConfig):
     def __post_init__(self) -> None:
         if not self.max_step_m > 0:
             raise ValueError(f"max_step_m must be > 0, got {self.max_step_m}")
-        if any(lo >= hi for lo, hi in zip(self.workspace_low_m, self.workspace_high_m, strict=True)):
+        if any(
+            lo >= hi for lo, hi in zip(self.workspace_low_m, self.workspace_high_m, strict=True)
+        ):
             raise ValueError(
-                f"workspace_low_m {self.workspace_low_m} must be below workspace_high_m {self.workspace_high_m}"
+                f"workspace_low_m {self.workspace_low_m} must be below "
+                f"workspace_high_m {self.workspace_high_m}"
             )
 
 
@@ -210,8 +217,10 @@ class AwdaDemonstrator(FloatingPandaGripper):
         qpos = self.robot.get_qpos()
         return qpos[:, -2] + qpos[:, -1]
 
-    def is_grasping(self, object: Actor, min_force: float = 0.5, max_angle: float = 85) -> torch.Tensor:
-        """(n,) both fingers push on ``object`` with >= ``min_force`` [N] from the inside (Panda's test)."""
+    def is_grasping(
+        self, object: Actor, min_force: float = 0.5, max_angle: float = 85
+    ) -> torch.Tensor:
+        """(n,) both fingers push on ``object`` with >= ``min_force`` [N] (Panda's test)."""
         l_contact_forces = self.scene.get_pairwise_contact_forces(self.finger1_link, object)
         r_contact_forces = self.scene.get_pairwise_contact_forces(self.finger2_link, object)
         lforce = torch.linalg.norm(l_contact_forces, axis=1)
