@@ -118,6 +118,8 @@ class EpisodeStats:
     """Of ``act_s``: rendering the wrist depth frames [s]."""
     localize_s: float = 0.0
     """Of ``act_s``: localization on the frames [s]."""
+    step_overhead_ms: list[float] = field(default_factory=list)
+    """Per :meth:`~GTWaypointsPolicy.act` call: its wall time minus rendering [ms]."""
     trajectories: list[Trajectory] = field(default_factory=list)
 
     @property
@@ -184,10 +186,13 @@ class GTWaypointsPolicy:
         t0 = time.perf_counter()
         states = robot_states(self._env)
         action = np.stack([ex.step(s) for ex, s in zip(self._executors, states, strict=True)])
-        self.stats.act_s += time.perf_counter() - t0
+        elapsed = time.perf_counter() - t0
+        capture_s = sum(loc.capture_s for loc in self._locators)
+        self.stats.step_overhead_ms.append(1e3 * (elapsed - (capture_s - self.stats.capture_s)))
+        self.stats.act_s += elapsed
         self.stats.act_calls += 1
         self.stats.frames = sum(loc.frames for loc in self._locators)
-        self.stats.capture_s = sum(loc.capture_s for loc in self._locators)
+        self.stats.capture_s = capture_s
         self.stats.localize_s = sum(loc.localize_s for loc in self._locators)
         return action.astype(np.float32)
 

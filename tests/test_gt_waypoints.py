@@ -1,0 +1,123 @@
+"""gt-waypoints, random and scripted policies (the sim tests are marked slow; CI runs them)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from awda_bench.policies.base import EpisodeContext, EpisodeSpec, Policy
+from awda_bench.policies.random_policy import RandomPolicy
+
+
+def _ctx(seed: int, num_envs: int = 2) -> EpisodeContext:
+    spec = EpisodeSpec(suite="pick_place", task=14, episode=0, seed=seed, demo_seed=seed + 1)
+    return EpisodeContext(env=SimpleNamespace(num_envs=num_envs), spec=spec)
+
+
+def test_random_policy_is_uniform_in_bounds_and_seeded_per_episode() -> None:
+    policy = RandomPolicy()
+    assert isinstance(policy, Policy)
+    policy.reset(_ctx(3))
+    a = np.stack([policy.act(None) for _ in range(500)])
+    assert a.shape == (500, 2, 4) and a.dtype == np.float32
+    assert a.min() >= -1.0 and a.max() <= 1.0
+    assert abs(a.mean()) < 0.05 and a.std() > 0.5
+    policy.reset(_ctx(3))
+    assert np.array_equal(policy.act(None), a[0])
+    policy.reset(_ctx(4))
+    assert not np.array_equal(policy.act(None), a[0])
+    assert not policy.done and policy.waypoints is None
+
+
+@pytest.fixture(scope="module")
+def pick_place_env():
+    gym = pytest.importorskip("gymnasium")
+    import awda_bench.envs  # noqa: F401
+
+    env = gym.make("AWDA-PickPlace-v1", obs_mode="state", num_envs=1, reward_mode="none")
+    yield env
+    env.close()
+
+
+def _run(env, policy, task: int, seed: int, horizon: int = 200):
+    from awda_bench.policies.gt_waypoints import episode_spec_for
+
+    obs, info = env.reset(seed=seed, options={"task": task})
+    policy.reset(EpisodeContext(env=env.unwrapped, spec=episode_spec_for("pick_place", task, seed)))
+    steps = 0
+    while steps < horizon and not policy.done:
+        obs, _, _, _, info = env.step(policy.act(obs))
+        steps += 1
+    return info, steps
+
+
+@pytest.mark.slow
+def test_gt_waypoints_plans_restores_the_start_and_succeeds(pick_place_env) -> None:
+    from awda_bench.policies.gt_waypoints import GTWaypointsPolicy, episode_spec_for
+
+    env = pick_place_env
+    base = env.unwrapped
+    env.reset(seed=123, options={"task": 14})
+    qpos0 = base.agent.robot.get_qpos().clone()
+    objects0, _ = base.object_poses()
+    policy = GTWaypointsPolicy()
+    policy.reset(EpisodeContext(env=base, spec=episode_spec_for("pick_place", 14, 123)))
+    # planning ran the expert on this very scene and put everything back
+    assert float((base.agent.robot.get_qpos() - qpos0).abs().max()) < 1e-6
+    assert float((base.object_poses()[0] - objects0).abs().max()) < 1e-6
+    assert not bool(base.grip_attempted[0])
+    traj = policy.stats.trajectories[0]
+    assert traj.meta["expert_done"] and traj.truth["grasp"].any()
+    W = policy.waypoints
+    assert W is not None and W.shape == (5, 4)
+    assert W[:, 3].tolist() == [0, 1, 1, 1, 0]
+
+    steps = 0
+    obs = base.get_obs()
+    info = {}
+    while steps < 200 and not policy.done:
+        obs, _, _, _, info = env.step(policy.act(obs))
+        steps += 1
+    assert policy.done
+    assert bool(info["success"][0]) and bool(info["reached"][0]) and bool(info["grasped"][0])
+    ex = policy.executors[0]
+    grasp = ex.grasp_primitives[0]
+    assert [e.kind for e in ex.log] == ["move", "grasp", "carry", "carry", "drop+move"]
+    # wrist depth frames only during the grasp's hover: one per hover step, plus the final check
+    assert policy.stats.frames == grasp.localizations > 0
+    assert grasp.localization_misses == 0
+    assert policy.stats.overhead_per_step_ms < 5.0  # generous bound for shared CI machines
+
+
+@pytest.mark.slow
+def test_scripted_policy_wraps_the_expert(pick_place_env) -> None:
+    from awda_bench.policies.scripted import ScriptedPolicy
+
+    policy = ScriptedPolicy()
+    info, steps = _run(pick_place_env, policy, task=15, seed=7)
+    assert policy.done and steps < 200
+    assert bool(info["success"][0])
+
+
+@pytest.mark.slow
+def test_wrist_localization_in_the_sim_finds_the_target_below(pick_place_env) -> None:
+    from awda_bench.policies.gt_waypoints import robot_states
+    from awda_bench.primitives.config import FreeSpaceConfig
+    from awda_bench.primitives.free_space import FreeSpace
+    from awda_bench.primitives.wrist_camera import WristLocator
+
+    env = pick_place_env
+    base = env.unwrapped
+    env.reset(seed=11, options={"task": 13})  # the can
+    target = base.target_pose()[0][0].cpu().numpy()
+    goal = target + np.array([0.0, 0.0, 0.04 + 0.2])
+    move = FreeSpace(goal, FreeSpaceConfig(reach_tol_m=0.003))
+    while (a := move.step(robot_states(base)[0])) is not None:
+        env.step(a[None].astype(np.float32))
+    locator = WristLocator(base)
+    loc = locator()
+    assert loc is not None and locator.frames == 1
+    assert np.linalg.norm(loc.position_world[:2] - target[:2]) < 0.015
+    assert loc.position_world[2] == pytest.approx(target[2] + 0.04, abs=0.01)  # the can's top
