@@ -145,10 +145,17 @@ def _worker_main(conn: Connection, config: WorkerConfig) -> None:
     conn.send(("ready", os.getpid()))
     try:
         while True:
-            message = conn.recv()
+            try:
+                message = conn.recv()
+            except EOFError:
+                break  # the parent was killed: nobody to report to, exit quietly
             if message is None:
                 break
-            conn.send(("result", executor.play(message)))
+            record = executor.play(message)
+            try:
+                conn.send(("result", record))
+            except BrokenPipeError:
+                break  # the parent was killed mid-episode; the episode re-runs on resume
     finally:
         executor.close()
         conn.close()
