@@ -68,12 +68,13 @@ class MinkEEPosController(PDJointPosController):
 
     def set_action(self, action: torch.Tensor) -> None:
         self._step = 0
-        self._start_qpos = self.qpos
+        qpos_all = self.articulation.get_qpos()
+        self._start_qpos = qpos_all[:, self.active_joint_indices]
         commands = np.clip(action.detach().cpu().numpy().astype(np.float64), -1.0, 1.0)
         delta_world = commands * self.config.max_step_m
         rotation = self._base_rotation()
-        qpos = self.articulation.get_qpos().cpu().numpy()
-        targets = self._start_qpos.cpu().numpy().copy()
+        qpos = qpos_all.cpu().numpy()
+        targets = np.empty((len(qpos), len(self.solvers[0].arm_qpos_index)))
         for i, solver in enumerate(self.solvers):
             delta_base = rotation[i % len(rotation)].T @ delta_world[i]
             q_arm, target, error = solver.solve_delta(
