@@ -148,7 +148,7 @@ def measure_localization(suite: Any, env: Any, scenes: int, seed: int) -> dict[s
 
 def measure_mining(suite: Any, demos: int, seed: int) -> dict[str, float]:
     from awda_bench.demo_recording import make_demo_env, record_demo
-    from awda_bench.mining import GraspMiningConfig, mine_grasp, precision_recall
+    from awda_bench.mining import GraspMiningConfig, PrecisionRecall, mine_grasp, precision_recall
 
     env = make_demo_env(suite, "agent")
     train = [t.index for t in suite.train_tasks]
@@ -158,18 +158,20 @@ def measure_mining(suite: Any, demos: int, seed: int) -> dict[str, float]:
         "no smoothing": GraspMiningConfig(smooth_steps=1),
         "d=2": GraspMiningConfig(lookahead_steps=2),
     }
-    totals = dict.fromkeys(configs)
+    totals: dict[str, PrecisionRecall | None] = dict.fromkeys(configs)
     for i in range(demos):
         task = train[i % len(train)]
         _, traj = record_demo(suite, task, seed + i, embodiment="agent", frames=False, env=env)
         for name, cfg in configs.items():
             pr = precision_recall(mine_grasp(traj, cfg), traj.truth["grasp"])
-            totals[name] = pr if totals[name] is None else totals[name] + pr
+            so_far = totals[name]
+            totals[name] = pr if so_far is None else so_far + pr
     print(
         f"grasp attribute mining, {demos} agent expert trajectories (tasks {train[0]}-{train[-1]}):"
     )
-    for name, pr in totals.items():
-        assert pr is not None
+    for name, total in totals.items():
+        assert total is not None
+        pr = total
         print(
             f"  {name:48s} precision {pr.precision:.3f}  recall {pr.recall:.3f}  "
             f"(TP {pr.true_positive}, FP {pr.false_positive}, FN {pr.false_negative})"
