@@ -1,6 +1,7 @@
-"""``python -m awda_bench bench <what>``: speed measurements printed side by side in one run.
+"""``python -m awda_bench bench <what> [options]``: speed measurements printed side by side in one run.
 
-Each benchmark lives beside the code it measures; this module only wires them:
+Each benchmark lives beside the code it measures; this module only wires them (and imports the
+chosen one alone, so the CLI starts fast):
 
     controller  mink IK vs ManiSkill pd_ee_delta_pos vs pd_joint_pos (env steps/s)
     env         task env steps/s with the scripted expert + cost of one rendered frame
@@ -14,7 +15,7 @@ from __future__ import annotations
 import argparse
 import importlib
 
-from awda_bench.errors import UsageError
+from awda_bench.errors import UnknownChoiceError
 from awda_bench.render_device import require_renderer
 
 BENCHMARKS: dict[str, tuple[str, str, str, bool]] = {
@@ -28,26 +29,24 @@ BENCHMARKS: dict[str, tuple[str, str, str, bool]] = {
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser("bench", help="speed benchmarks (controller, env, primitives, harness, inference)")
-    sub = parser.add_subparsers(dest="benchmark", required=True, metavar="BENCHMARK")
-    for name, (module_name, add_args, _run, _render) in BENCHMARKS.items():
-        bench_parser = sub.add_parser(name, help=f"benchmark: {name}")
-        bench_parser.set_defaults(_benchmark=name)
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:
-            if not exc.name or not module_name.startswith(exc.name):
-                raise
-            bench_parser.set_defaults(_missing=module_name)
-            continue
-        getattr(module, add_args)(bench_parser)
+    parser = subparsers.add_parser(
+        "bench",
+        help="speed benchmarks (controller, env, primitives, harness, inference)",
+        description="Run one benchmark; 'bench NAME --help' lists its options.",
+    )
+    parser.add_argument("benchmark", metavar="BENCHMARK", help=f"one of: {', '.join(BENCHMARKS)}")
+    parser.add_argument("options", nargs=argparse.REMAINDER, help="the benchmark's own options")
     return parser
 
 
 def run(args: argparse.Namespace) -> int:
-    module_name, _add, run_name, needs_renderer = BENCHMARKS[args._benchmark]
-    if getattr(args, "_missing", None):
-        raise UsageError(f"benchmark {args._benchmark!r} is not available: module {module_name} is missing")
+    if args.benchmark not in BENCHMARKS:
+        raise UnknownChoiceError("benchmark", args.benchmark, BENCHMARKS)
+    module_name, add_args, run_name, needs_renderer = BENCHMARKS[args.benchmark]
+    module = importlib.import_module(module_name)
+    parser = argparse.ArgumentParser(prog=f"python -m awda_bench bench {args.benchmark}")
+    getattr(module, add_args)(parser)
+    options = parser.parse_args(args.options)
     if needs_renderer:
         require_renderer()
-    return int(getattr(importlib.import_module(module_name), run_name)(args))
+    return int(getattr(module, run_name)(options))
