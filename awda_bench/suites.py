@@ -44,6 +44,15 @@ class TaskDef:
     """Human-readable name, e.g. ``"can -> compartment 2"``."""
     family: str
     """Task family (``pick_place``, ``door``, ...): the column of Table S4."""
+    env_id: str | None = None
+    """ManiSkill env serving this task when it differs from the suite's (suites mixing families)."""
+    variation: int | None = None
+    """Value passed as ``options["task"]`` to that env; ``None`` means :attr:`index`."""
+
+    @property
+    def reset_task(self) -> int:
+        """What ``env.reset(options={"task": ...})`` receives for this task."""
+        return self.index if self.variation is None else self.variation
 
 
 @dataclass(frozen=True)
@@ -89,6 +98,15 @@ class Suite:
         """Episode length [s]."""
         return self.horizon_steps / self.control_freq_hz
 
+    def env_id_for(self, task: int) -> str:
+        """The env id serving suite task ``task``."""
+        return self.task(task).env_id or self.env_id
+
+    @property
+    def env_ids(self) -> tuple[str, ...]:
+        """Every env id the suite uses, in first-use order."""
+        return tuple(dict.fromkeys(t.env_id or self.env_id for t in self.tasks))
+
     def task(self, index: int) -> TaskDef:
         for t in self.tasks:
             if t.index == index:
@@ -120,7 +138,13 @@ def load_suite(name: str, directory: Path = SUITES_DIR) -> Suite:
         raise CorruptFileError(f"suite file {path} is not valid TOML ({exc}); fix or restore it") from exc
     try:
         tasks = tuple(
-            TaskDef(index=int(t["index"]), name=str(t["name"]), family=str(t["family"]))
+            TaskDef(
+                index=int(t["index"]),
+                name=str(t["name"]),
+                family=str(t["family"]),
+                env_id=str(t["env_id"]) if "env_id" in t else None,
+                variation=int(t["variation"]) if "variation" in t else None,
+            )
             for t in raw["tasks"]
         )
         suite = Suite(

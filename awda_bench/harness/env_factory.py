@@ -22,13 +22,15 @@ ENV_PACKAGE = "awda_bench.envs"
 """Package whose import registers the suites' ManiSkill envs."""
 
 
-def make_env(suite: Suite, *, render_mode: str | None = None) -> Any:
-    """``gymnasium.make`` the suite's env: state observations, no reward, one env.
+def make_env(suite: Suite, *, env_id: str | None = None, render_mode: str | None = None) -> Any:
+    """``gymnasium.make`` one of the suite's envs (default: its main ``env_id``): state
+    observations, no reward, one env.
 
     ``render_mode="rgb_array"`` lets :func:`env.render` return frames (videos); rendering is only
     done when asked for.
     """
-    if ":" not in suite.env_id:
+    env_id = env_id or suite.env_id
+    if ":" not in env_id:
         try:
             importlib.import_module(ENV_PACKAGE)
         except ModuleNotFoundError as exc:
@@ -37,7 +39,7 @@ def make_env(suite: Suite, *, render_mode: str | None = None) -> Any:
             ) from exc
     try:
         return gym.make(
-            suite.env_id,
+            env_id,
             obs_mode="state",
             control_mode=CONTROL_MODE,
             reward_mode="none",
@@ -47,4 +49,4 @@ def make_env(suite: Suite, *, render_mode: str | None = None) -> Any:
             disable_env_checker=True,
         )
     except gym.error.Error as exc:
-        raise UsageError(f"suite {suite.name!r}: cannot make env {suite.env_id!r} ({exc})") from exc
+        raise UsageError(f"suite {suite.name!r}: cannot make env {env_id!r} ({exc})") from exc

@@ -68,7 +68,7 @@ def run_episode(
     """
     t_start = time.perf_counter()
     seed_globals(spec.seed)
-    obs, info = env.reset(seed=spec.seed, options={"task": spec.task})
+    obs, info = env.reset(seed=spec.seed, options={"task": suite.task(spec.task).reset_task})
     env_time = time.perf_counter() - t_start
     if on_frame is not None:
         on_frame(env)

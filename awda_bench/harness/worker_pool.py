@@ -3,7 +3,7 @@
 ::
 
     parent                                   worker k (spawned; OMP_NUM_THREADS=1)
-      start ------------------------------->   env = make_env(suite)      (once)
+      start ------------------------------->   env = make_env(suite)      (once per env id)
             <----------------------- ("ready", pid)
       ("job", Job) ------------------------>   policy cached per (method, snapshot)
             <--------------------- ("result", EpisodeRecord)   status ok, or error + traceback
@@ -95,14 +95,28 @@ def error_record(job: Job, family: str, message: str, wall_time_s: float = 0.0) 
 
 
 class EpisodeExecutor:
-    """Owns one env and the current policy; plays jobs, turning exceptions into error records."""
+    """Owns the suite's envs (one per env id, built on first use and reused) and the current
+    policy; plays jobs, turning exceptions into error records."""
 
     def __init__(self, config: WorkerConfig) -> None:
         self.suite: Suite = load_suite(config.suite_name, Path(config.suites_dir))
-        make_env = resolve(config.env_factory, what="env factory")
-        self.env = make_env(self.suite, render_mode=config.render_mode)
+        self._make_env = resolve(config.env_factory, what="env factory")
+        self._render_mode = config.render_mode
+        self.envs: dict[str, Any] = {}
+        self.env_for(self.suite.env_id)  # fail at start-up, not in the first episode
         self._policy_key: tuple[str, str] | None = None
         self._policy: Policy | None = None
+
+    def env_for(self, env_id: str) -> Any:
+        """The env with id ``env_id``, built once."""
+        if env_id not in self.envs:
+            self.envs[env_id] = self._make_env(self.suite, env_id=env_id, render_mode=self._render_mode)
+        return self.envs[env_id]
+
+    @property
+    def env(self) -> Any:
+        """The suite's main env."""
+        return self.envs[self.suite.env_id]
 
     def play(
         self, job: Job, on_frame: FrameHook | None = None, extras: dict[str, Any] | None = None
@@ -117,7 +131,7 @@ class EpisodeExecutor:
                 self._policy_key = key
                 setup = time.perf_counter() - t0
             record = run_episode(
-                self.env,
+                self.env_for(self.suite.env_id_for(job.spec.task)),
                 self._policy,
                 job.spec,
                 self.suite,
@@ -132,7 +146,8 @@ class EpisodeExecutor:
             return error_record(job, family, traceback.format_exc(), time.perf_counter() - t0)
 
     def close(self) -> None:
-        self.env.close()
+        for env in self.envs.values():
+            env.close()
 
 
 def _worker_main(conn: Connection, config: WorkerConfig) -> None:
