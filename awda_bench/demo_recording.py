@@ -5,7 +5,8 @@ policy watches) and by ground-truth waypoint extraction (state only, ``frames=Fa
 
     env.reset(seed, task)                  frame 0 rendered
     for t in 0 .. T-1:                     frames at t = k, 2k, ... (render_every = k) and the last
-        record tcp_pos[t], gripper_opening_m[t], truth["grasp"][t]   (state *before* a_t)
+        record tcp_pos[t], gripper_opening_m[t], truth[k][t]   (state *before* a_t; k from the
+                                                                env's truth_signals(), e.g. "grasp")
         a_t = expert.act(obs_t); record actions[t]; env.step(a_t)
         stop once the expert is done (plus settle_steps) or at the suite's horizon
 """
@@ -97,7 +98,8 @@ def record_demo(
     spec = EpisodeSpec(suite=suite.name, task=task, episode=0, seed=seed, demo_seed=seed)
     expert.reset(EpisodeContext(env=base, spec=spec))
 
-    tcp, opening, actions, grasp = [], [], [], []
+    tcp, opening, actions = [], [], []
+    truth: dict[str, list[bool]] = {}
     images: list[np.ndarray] = []
     frame_steps: list[int] = []
     settle = 0
@@ -107,7 +109,8 @@ def record_demo(
             frame_steps.append(t)
         tcp.append(base.agent.tcp_pose.p[0].cpu().numpy())
         opening.append(float(base.gripper_opening_m()[0]))
-        grasp.append(bool(base.is_grasping_target()[0]))
+        for name, value in base.truth_signals().items():
+            truth.setdefault(name, []).append(bool(value[0]))
         action = expert.act(obs)
         actions.append(np.asarray(action[0], dtype=np.float32))
         obs, _, _, _, info = env.step(action)
@@ -124,7 +127,7 @@ def record_demo(
         tcp_pos=np.asarray(tcp, dtype=np.float64).reshape(steps, 3),
         gripper_opening_m=np.asarray(opening, dtype=np.float64),
         actions=np.asarray(actions, dtype=np.float32).reshape(steps, 4),
-        truth={"grasp": np.asarray(grasp, dtype=bool)},
+        truth={name: np.asarray(values, dtype=bool) for name, values in truth.items()},
         meta={
             "suite": suite.name,
             "task": task,

@@ -121,7 +121,7 @@ def test_make_reset_step_default_agent(env) -> None:
     assert int(info["task"][0]) == 5 and not bool(info["success"][0])
     obs, reward, terminated, truncated, info = env.step(np.zeros(4, dtype=np.float32))
     assert torch.isfinite(obs).all()
-    assert set(info) >= {"success", "reached", "grasped", "success_once", "is_grasped"}
+    assert set(info) >= {"success", "reached", "grasped", "success_once", "target_distance_m"}
 
 
 @pytest.mark.slow
