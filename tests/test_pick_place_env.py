@@ -188,6 +188,25 @@ def test_nan_action_is_rejected(env) -> None:
 
 
 @pytest.mark.slow
+def test_demonstrator_env_rejects_nan_and_keeps_its_rest_pose() -> None:
+    import awda_bench.envs  # noqa: F401
+
+    demo = gym.make(
+        "AWDA-PickPlace-v1", robot_uids="awda_demonstrator", obs_mode="state", reward_mode="none"
+    )
+    try:
+        demo.reset(seed=0)
+        tcp = demo.unwrapped.agent.tcp_pose.p.clone()
+        for _ in range(10):  # zero action: the hand holds still (gravity off, stiff drives)
+            demo.step(np.zeros(4, dtype=np.float32))
+        assert float(torch.linalg.norm(demo.unwrapped.agent.tcp_pose.p - tcp)) < 1e-3
+        with pytest.raises(ValueError, match="NaN"):
+            demo.step(np.array([0.0, np.nan, 0.0, 0.0], dtype=np.float32))
+    finally:
+        demo.close()
+
+
+@pytest.mark.slow
 def test_bad_task_option_is_a_usage_error(env) -> None:
     with pytest.raises(UsageError, match="0..15"):
         env.reset(seed=0, options={"task": 16})
