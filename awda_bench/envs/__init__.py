@@ -5,6 +5,7 @@ Importing it also registers the robots the tasks accept: the demonstrator
 the ``panda_awda`` agent).
 """
 
+from awda_bench.envs import press_button, stack_block  # noqa: F401  (register their envs)
 from awda_bench.envs.pick_place import PickPlaceEnv, PickPlaceLayout
 from awda_bench.robot import demonstrator as _demonstrator  # noqa: F401  (registers robots)
 

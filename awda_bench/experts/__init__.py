@@ -9,6 +9,8 @@ import numpy as np
 
 from awda_bench.errors import UnknownChoiceError
 from awda_bench.experts.pick_place import PickPlaceExpert, PickPlaceExpertConfig
+from awda_bench.experts.press_button import PressButtonExpert
+from awda_bench.experts.stack_block import StackBlockExpert
 from awda_bench.policies.base import EpisodeContext, Policy
 
 EMBODIMENT_NAMES = ("agent", "demonstrator")
@@ -19,6 +21,8 @@ EXPERT_SUITES = ("pick_place", "mosaic")
 
 FAMILY_EXPERTS: dict[str, Callable[[], Policy]] = {
     "pick_place": lambda: PickPlaceExpert(PickPlaceExpertConfig(), name="scripted"),
+    "press_button": lambda: PressButtonExpert(name="scripted"),
+    "stack_block": lambda: StackBlockExpert(name="scripted"),
 }
 """Expert factory per task family (the env class's ``family`` attribute); one line per family."""
 

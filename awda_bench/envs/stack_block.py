@@ -1,0 +1,222 @@
+"""AWDA-StackBlock-v1: three coloured cubes; put cube A on cube B, C is a distractor (SPEC §3.2).
+
+Variation ``v`` picks the ordered pair ``STACK_ORDERS[v] = (A, B)`` of the cubes red (0), green (1)
+and blue (2)::
+
+    v :  0       1       2       3       4       5
+    A/B: red/gr  red/bl  gr/red  gr/bl   bl/red  bl/gr
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import permutations
+from typing import Any, ClassVar
+
+import numpy as np
+import torch
+from mani_skill.utils.registration import register_env
+from mani_skill.utils.structs.pose import Pose
+
+from awda_bench.envs.objects import ObjectSpec, build_object, distance_to_objects
+from awda_bench.envs.task_base import AWDATaskEnv
+
+STACK_ORDERS: tuple[tuple[int, int], ...] = tuple(permutations(range(3), 2))
+"""``(A, B)`` per variation: the cube to pick (A) and the cube to put it on (B)."""
+
+
+def _cube(name: str, color: tuple[float, float, float, float], edge_m: float) -> ObjectSpec:
+    return ObjectSpec(
+        name=name, shape="box", size_m=(edge_m, edge_m, edge_m), color=color, density_kg_m3=600.0
+    )
+
+
+@dataclass(frozen=True)
+class StackBlockLayout:
+    """Geometry, randomization and success tolerances of the stacking scene (table top z = 0)."""
+
+    edge_m: float = 0.045
+    """Cube edge length [m] (the Panda fingers open to 8 cm, > the 6.4 cm diagonal)."""
+    colors: tuple[tuple[float, float, float, float], ...] = (
+        (0.90, 0.12, 0.12, 1.0),
+        (0.12, 0.75, 0.18, 1.0),
+        (0.12, 0.28, 0.90, 1.0),
+    )
+    """RGBA colour of cubes 0 (red), 1 (green), 2 (blue)."""
+    spawn_center_xy_m: tuple[float, float] = (-0.09, 0.0)
+    """Centre of the area the cubes are drawn in (world) [m]."""
+    spawn_half_size_m: tuple[float, float] = (0.11, 0.18)
+    """Cube centres are drawn uniformly in ``spawn_center_xy_m`` +- this [m]."""
+    min_separation_m: float = 0.11
+    """Minimum distance between any two cube centres [m] (open fingers clear the neighbours)."""
+    layout_candidates: int = 1024
+    """Whole layouts drawn per env at reset; the first one meeting ``min_separation_m`` is kept."""
+    stack_gap_tolerance_m: float = 0.006
+    """Success: A's bottom within this of B's top (resting on it, in contact or a few mm) [m]."""
+    max_resting_speed_m_s: float = 0.03
+    """Success: A moves slower than this (it rests, it is not falling or being carried) [m/s]."""
+
+    @property
+    def cubes(self) -> tuple[ObjectSpec, ...]:
+        """The three cube specs (red, green, blue)."""
+        return tuple(
+            _cube(name, color, self.edge_m)
+            for name, color in zip(
+                ("red_cube", "green_cube", "blue_cube"), self.colors, strict=True
+            )
+        )
+
+
+@register_env("AWDA-StackBlock-v1", max_episode_steps=300)
+class StackBlockEnv(AWDATaskEnv):
+    """
+    **Task Description:**
+    Three cubes (red, green, blue; 4.5 cm) lie on the table. Pick cube A and put it on cube B; the
+    third cube is a distractor. ``reset(options={"task": v})`` selects the ordered pair
+    ``STACK_ORDERS[v]`` (6 permutations of 2 of the 3 cubes).
+
+    **Randomizations:**
+    - the three cube centres are drawn uniformly in the spawn area (``spawn_half_size_m`` around
+      ``spawn_center_xy_m``), pairwise at least ``min_separation_m`` apart
+    - each cube's yaw is uniform in [0, pi/2) (a cube's full symmetry); cubes rest on the table
+    - the robot starts at its rest keyframe (no noise)
+
+    **Success Conditions:**
+    - A's centre lies within B's footprint (in B's frame, ``|x|, |y| <= edge / 2``), A's bottom is
+      within ``stack_gap_tolerance_m`` of B's top, A is not grasped (released), and A moves slower
+      than ``max_resting_speed_m_s``
+    - grasp analysis (latched, see :class:`AWDATaskEnv`): ``reached`` = TCP within 4 cm of A's
+      surface before the first grip command; ``grasped`` = reached, then A raised >= 5 cm
+    """
+
+    family: ClassVar[str] = "stack_block"
+    num_variations: ClassVar[int] = len(STACK_ORDERS)
+    has_grasp_target: ClassVar[bool] = True
+
+    def __init__(self, *args: Any, layout: StackBlockLayout | None = None, **kwargs: Any) -> None:
+        self.layout = layout or StackBlockLayout()
+        self.cube_specs = self.layout.cubes
+        super().__init__(*args, **kwargs)
+
+    # ------------------------------------------------------------------ scene
+    def _load_task_scene(self, options: dict) -> None:
+        self.cubes = [
+            build_object(self.scene, spec, spec.half_height_m) for spec in self.cube_specs
+        ]
+        self._orders = torch.tensor(STACK_ORDERS, dtype=torch.long, device=self.device)
+
+    def _sample_layouts(self, b: int) -> torch.Tensor:
+        """(b, 3, 2) cube centres, pairwise >= ``min_separation_m`` (whole-layout rejection)."""
+        lay = self.layout
+        m, k = lay.layout_candidates, len(self.cubes)
+        half = torch.tensor(lay.spawn_half_size_m, device=self.device)
+        center = torch.tensor(lay.spawn_center_xy_m, device=self.device)
+        xy = (torch.rand((b, m, k, 2), device=self.device) * 2 - 1) * half + center
+        d = torch.linalg.norm(xy[:, :, :, None, :] - xy[:, :, None, :, :], dim=-1)
+        d = d + torch.eye(k, device=self.device) * 1e3
+        ok = d.flatten(2).min(dim=2).values >= lay.min_separation_m
+        if not bool(ok.any(dim=1).all()):
+            raise RuntimeError(
+                f"no layout with cubes {lay.min_separation_m} m apart among {m} candidates; "
+                "enlarge spawn_half_size_m or layout_candidates"
+            )
+        first = ok.to(torch.int8).argmax(dim=1)
+        return xy[torch.arange(b, device=self.device), first]
+
+    def _initialize_task(self, env_idx: torch.Tensor, variation: torch.Tensor) -> None:
+        b = len(env_idx)
+        xy = self._sample_layouts(b)
+        yaw = torch.rand((b, len(self.cubes))) * (np.pi / 2)
+        for j, (cube, spec) in enumerate(zip(self.cubes, self.cube_specs, strict=True)):
+            p = torch.zeros((b, 3))
+            p[:, :2] = xy[:, j]
+            p[:, 2] = spec.half_height_m
+            q = torch.zeros((b, 4))
+            q[:, 0] = torch.cos(yaw[:, j] / 2)
+            q[:, 3] = torch.sin(yaw[:, j] / 2)
+            cube.set_pose(Pose.create_from_pq(p, q))
+            cube.set_linear_velocity(torch.zeros((b, 3)))
+            cube.set_angular_velocity(torch.zeros((b, 3)))
+
+    # ------------------------------------------------------------------ task state
+    @property
+    def cube_a(self) -> torch.Tensor:
+        """(n,) index of the cube to pick (A) per env."""
+        return self._orders[self.task, 0]
+
+    @property
+    def cube_b(self) -> torch.Tensor:
+        """(n,) index of the cube to stack on (B) per env."""
+        return self._orders[self.task, 1]
+
+    def cube_poses(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """Positions (n, 3, 3) [m] and quaternions (n, 3, 4, wxyz) of the three cubes."""
+        return (
+            torch.stack([c.pose.p for c in self.cubes], dim=1),
+            torch.stack([c.pose.q for c in self.cubes], dim=1),
+        )
+
+    def _pick(self, values: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
+        return values[torch.arange(self.num_envs, device=self.device), index]
+
+    def target_position(self) -> torch.Tensor:
+        """(n, 3) centre of cube A [m]."""
+        return self._pick(self.cube_poses()[0], self.cube_a)
+
+    def base_pose(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """Position (n, 3) and quaternion (n, 4) of cube B."""
+        pos, quat = self.cube_poses()
+        return self._pick(pos, self.cube_b), self._pick(quat, self.cube_b)
+
+    def target_distance(self) -> torch.Tensor:
+        """(n,) TCP distance to cube A's surface [m]."""
+        pos, quat = self.cube_poses()
+        d = distance_to_objects(self.agent.tcp_pose.p, pos, quat, self.cube_specs)
+        return self._pick(d, self.cube_a)
+
+    def is_grasping_target(self) -> torch.Tensor:
+        """(n,) simulator truth: the fingers hold cube A (the agent's contact-force test)."""
+        out = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+        for j in torch.unique(self.cube_a).tolist():
+            out = torch.where(self.cube_a == j, self.agent.is_grasping(self.cubes[j]), out)
+        return out
+
+    def _evaluate_task(self) -> dict[str, torch.Tensor]:
+        lay = self.layout
+        pos, quat = self.cube_poses()
+        a_pos = self._pick(pos, self.cube_a)
+        b_pos = self._pick(pos, self.cube_b)
+        b_quat = self._pick(quat, self.cube_b)
+        # A's centre in B's frame (B's yaw only: a resting cube is upright)
+        yaw = 2 * torch.atan2(b_quat[:, 3], b_quat[:, 0])
+        d = a_pos - b_pos
+        local_x = torch.cos(yaw) * d[:, 0] + torch.sin(yaw) * d[:, 1]
+        local_y = -torch.sin(yaw) * d[:, 0] + torch.cos(yaw) * d[:, 1]
+        half = lay.edge_m / 2
+        on_footprint = (local_x.abs() <= half) & (local_y.abs() <= half)
+        gap = d[:, 2] - lay.edge_m
+        touching = gap.abs() <= lay.stack_gap_tolerance_m
+        speeds = torch.stack([c.linear_velocity for c in self.cubes], dim=1)
+        resting = (
+            torch.linalg.norm(self._pick(speeds, self.cube_a), dim=1) <= lay.max_resting_speed_m_s
+        )
+        grasped = self.is_grasping_target()
+        return {
+            "success": on_footprint & touching & resting & ~grasped,
+            "is_grasped": grasped,
+            "a_on_b_gap_m": gap,
+        }
+
+    def _get_obs_extra(self, info: dict) -> dict:
+        obs = super()._get_obs_extra(info)
+        if "state" in self.obs_mode:
+            pos, quat = self.cube_poses()
+            obs.update(
+                cube_poses=torch.cat([pos, quat], dim=2).flatten(1),
+                target_pos=self.target_position(),
+                base_pos=self.base_pose()[0],
+            )
+        return obs
+
+
+__all__ = ["STACK_ORDERS", "StackBlockEnv", "StackBlockLayout"]

@@ -1,0 +1,174 @@
+"""Scripted press-button expert from privileged state, acting only through the 4-D action space.
+
+Phases per env (straight-line moves, at most ``max_step_m`` per axis per step)::
+
+    HOVER --> CLOSE --> PRESS --> HOLD --> RELEASE --> DONE
+    above the   fingers   straight   keep       straight up
+    target cap  shut      down       pushing    (the spring pops the button back)
+
+PRESS aims ``overshoot_m`` below the depth at which the fingertips would hold the cap on its lower
+stop, so the arm keeps pushing once the button bottoms out; it ends when the button is within
+``bottom_tolerance_m`` of its full travel. HOLD keeps the same goal for ``hold_steps``: the button
+stays down and the TCP stays blocked, which is what the pressing attribute sees (see
+:mod:`awda_bench.mining`: while the button travels, the arm moves as fast as in free space, so
+only the held part of a press is visible to the miner: ~4 of the truth's steps are not, so a
+2 s hold keeps the mined attribute's recall above 90 %). Works for any embodiment of
+:mod:`awda_bench.envs.embodiments` (step size and grip sign from there).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import IntEnum
+from typing import Any
+
+import numpy as np
+
+from awda_bench.policies.base import EpisodeContext
+
+
+class Phase(IntEnum):
+    HOVER = 0
+    CLOSE = 1
+    PRESS = 2
+    HOLD = 3
+    RELEASE = 4
+    DONE = 5
+
+
+_GRIP_CLOSED = {Phase.CLOSE, Phase.PRESS, Phase.HOLD, Phase.RELEASE}
+"""Phases during which the gripper is commanded closed (fingers shut: a blunt pusher)."""
+
+
+@dataclass(frozen=True)
+class PressButtonExpertConfig:
+    """Heights, tolerances and step budgets of the scripted press-button expert."""
+
+    hover_clearance_m: float = 0.05
+    """HOVER goal: TCP this far above the target cap's top at rest [m]."""
+    fingertip_below_tcp_m: float = 0.009
+    """The closed fingertips reach this far below the TCP [m] (measured on the Panda hand)."""
+    overshoot_m: float = 0.01
+    """PRESS/HOLD goal: this far below where the fingertips hold the cap on its stop [m]."""
+    bottom_tolerance_m: float = 0.002
+    """PRESS ends when the button is within this of its full travel [m]."""
+    close_steps: int = 4
+    """Control steps the gripper is commanded closed before pressing."""
+    hold_steps: int = 40
+    """Control steps the button is held down (2 s at 20 Hz; see the module docstring)."""
+    xy_tolerance_m: float = 0.004
+    """Horizontal goal tolerance of HOVER [m] (the cap radius is 2.2 cm)."""
+    z_tolerance_m: float = 0.006
+    """Vertical goal tolerance [m]."""
+    phase_budget_steps: int = 90
+    """Most control steps any moving phase may take (the agent tracks ~8 mm per full step)."""
+
+    def __post_init__(self) -> None:
+        for name in (
+            "hover_clearance_m",
+            "overshoot_m",
+            "bottom_tolerance_m",
+            "xy_tolerance_m",
+            "z_tolerance_m",
+        ):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
+        for name in ("close_steps", "hold_steps", "phase_budget_steps"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+
+
+class PressButtonExpert:
+    """Scripted expert of the ``press_button`` family (``AWDA-PressButton-v1``), batched."""
+
+    def __init__(
+        self, config: PressButtonExpertConfig | None = None, name: str = "scripted"
+    ) -> None:
+        self.config = config or PressButtonExpertConfig()
+        self.name = name
+        self._env: Any = None
+        self.phase = np.zeros(0, dtype=np.int64)
+        """(n,) current :class:`Phase` per env."""
+        self.phase_steps = np.zeros(0, dtype=np.int64)
+        """(n,) control steps spent in the current phase."""
+
+    # ------------------------------------------------------------------ Policy protocol
+    def reset(self, ctx: EpisodeContext) -> None:
+        self._env = ctx.env
+        n = self._env.num_envs
+        self.phase = np.full(n, int(Phase.HOVER), dtype=np.int64)
+        self.phase_steps = np.zeros(n, dtype=np.int64)
+
+    @property
+    def done(self) -> bool:
+        return bool(len(self.phase)) and bool((self.phase == Phase.DONE).all())
+
+    @property
+    def waypoints(self) -> np.ndarray | None:
+        return None
+
+    def act(self, obs: Any) -> np.ndarray:
+        """(n, 4) action for the loaded embodiment: straight-line step towards the phase goal."""
+        if self._env is None:
+            raise RuntimeError("act() before reset(ctx)")
+        env, cfg = self._env, self.config
+        lay = env.layout
+        tcp = env.agent.tcp_pose.p.cpu().numpy().astype(np.float64)
+        cap = env.target_rest_cap_top().cpu().numpy().astype(np.float64)
+        depth = env.target_depth_m().cpu().numpy().astype(np.float64)
+        hover_z = cap[:, 2] + cfg.hover_clearance_m
+        press_z = cap[:, 2] - lay.travel_m + cfg.fingertip_below_tcp_m - cfg.overshoot_m
+
+        goal = tcp.copy()
+        for i in range(len(tcp)):
+            self._advance(i, tcp[i], cap[i], hover_z[i], depth[i], lay.travel_m)
+            phase = Phase(self.phase[i])
+            if phase == Phase.HOVER:
+                goal[i] = (cap[i, 0], cap[i, 1], hover_z[i])
+            elif phase in (Phase.PRESS, Phase.HOLD):
+                goal[i] = (cap[i, 0], cap[i, 1], press_z[i])
+            elif phase == Phase.RELEASE:
+                goal[i] = (cap[i, 0], cap[i, 1], hover_z[i])
+            # CLOSE, DONE: hold position
+            self.phase_steps[i] += 1
+
+        emb = env.embodiment
+        action = np.zeros((len(tcp), 4), dtype=np.float32)
+        step = (goal - tcp) / emb.max_step_m
+        step /= np.maximum(np.abs(step).max(axis=1, keepdims=True), 1.0)
+        action[:, :3] = step
+        closed = np.isin(self.phase, [int(p) for p in _GRIP_CLOSED])
+        action[:, 3] = np.where(closed, 1.0, -1.0)
+        return emb.to_env_action(action)
+
+    # ------------------------------------------------------------------ phase logic
+    def _advance(
+        self, i: int, tcp: np.ndarray, cap: np.ndarray, hover_z: float, depth: float, travel: float
+    ) -> None:
+        """Move env ``i`` to its next phase once the current one is finished (one per step)."""
+        cfg = self.config
+        phase = Phase(self.phase[i])
+        steps = self.phase_steps[i]
+        over_budget = steps >= cfg.phase_budget_steps
+        xy_err = float(np.linalg.norm(tcp[:2] - cap[:2]))
+        nxt = phase
+        if phase == Phase.HOVER:
+            if (
+                xy_err <= cfg.xy_tolerance_m and abs(tcp[2] - hover_z) <= cfg.z_tolerance_m
+            ) or over_budget:
+                nxt = Phase.CLOSE
+        elif phase == Phase.CLOSE:
+            if steps >= cfg.close_steps:
+                nxt = Phase.PRESS
+        elif phase == Phase.PRESS:
+            if depth >= travel - cfg.bottom_tolerance_m or over_budget:
+                nxt = Phase.HOLD
+        elif phase == Phase.HOLD:
+            if steps >= cfg.hold_steps:
+                nxt = Phase.RELEASE
+        elif phase == Phase.RELEASE:
+            if tcp[2] >= hover_z - cfg.z_tolerance_m or over_budget:
+                nxt = Phase.DONE
+        if nxt != phase:
+            self.phase[i] = int(nxt)
+            self.phase_steps[i] = 0
