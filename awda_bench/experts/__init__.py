@@ -8,6 +8,8 @@ from typing import Any
 import numpy as np
 
 from awda_bench.errors import UnknownChoiceError
+from awda_bench.experts.basketball import BasketballExpert
+from awda_bench.experts.nut_assembly import NutAssemblyExpert
 from awda_bench.experts.pick_place import PickPlaceExpert, PickPlaceExpertConfig
 from awda_bench.experts.press_button import PressButtonExpert
 from awda_bench.experts.stack_block import StackBlockExpert
@@ -23,6 +25,8 @@ FAMILY_EXPERTS: dict[str, Callable[[], Policy]] = {
     "pick_place": lambda: PickPlaceExpert(PickPlaceExpertConfig(), name="scripted"),
     "press_button": lambda: PressButtonExpert(name="scripted"),
     "stack_block": lambda: StackBlockExpert(name="scripted"),
+    "basketball": lambda: BasketballExpert(name="scripted"),
+    "nut_assembly": lambda: NutAssemblyExpert(name="scripted"),
 }
 """Expert factory per task family (the env class's ``family`` attribute); one line per family."""
 
