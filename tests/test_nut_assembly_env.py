@@ -1,0 +1,192 @@
+"""AWDA-NutAssembly-v1: geometry invariants (fast), env checks and the scripted expert (slow)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from awda_bench.envs.nut_assembly import NUTS, PEGS, NutAssemblyLayout, NutSpec
+from awda_bench.envs.static_props import PegSpec
+from awda_bench.errors import UsageError
+from awda_bench.experts.nut_assembly import NutAssemblyExpert, NutAssemblyExpertConfig
+from awda_bench.policies.base import EpisodeContext, EpisodeSpec
+
+PANDA_OPEN_M = 0.08
+"""Panda finger gap when open [m]."""
+PANDA_FINGER_HALF_WIDTH_M = 0.00875
+"""Half a Panda fingertip's extent along the handle (x) [m]."""
+
+# ---------------------------------------------------------------------------- fast
+
+
+def test_nut_geometry_fits_peg_and_gripper() -> None:
+    for nut in NUTS:
+        assert 2 * nut.handle_half_width_m <= PANDA_OPEN_M - 0.04
+        # fingers around the handle's centre stay clear of the nut body
+        assert nut.handle_length_m / 2 > PANDA_FINGER_HALF_WIDTH_M + 0.005
+        gx, gy, gz = nut.grasp_point_m
+        assert gx == pytest.approx(-(nut.outer_half_m + nut.handle_length_m / 2)) and gy == gz == 0
+        lo, hi = nut.bounds_m
+        assert lo[0] < gx < hi[0] and hi[0] == pytest.approx(nut.outer_half_m)
+        for peg in PEGS:
+            assert nut.hole_half_m - peg.half_width_m >= 0.005  # >= 5 mm play per side
+            assert peg.height_m >= 0.08
+
+
+def test_layout_rejects_a_hole_smaller_than_the_peg_diagonal() -> None:
+    tight = NutSpec(name="tight", color=(1, 1, 1, 1), hole_half_m=0.013)
+    with pytest.raises(ValueError, match="diagonal"):
+        NutAssemblyLayout(nuts=(tight,) * 3)
+
+
+def test_nuts_and_pegs_are_distinct() -> None:
+    assert len({n.color for n in NUTS}) == 3 and len({p.color for p in PEGS}) == 3
+    assert not {n.color for n in NUTS} & {p.color for p in PEGS}
+    xy = np.array([p.center_xy_m for p in PEGS])
+    gaps = np.linalg.norm(xy[:, None] - xy[None], axis=-1) + np.eye(3)
+    assert gaps.min() > 2 * max(p.plate_half_m for p in PEGS)
+    peg = PegSpec(center_xy_m=(0.0, 0.0), color=(1, 1, 1, 1))
+    assert peg.base_z_m == pytest.approx(0.006) and peg.top_z_m == pytest.approx(0.096)
+
+
+def test_expert_config_rejects_non_positive_values() -> None:
+    with pytest.raises(ValueError, match="xy_tolerance_m"):
+        NutAssemblyExpertConfig(xy_tolerance_m=0.0)
+    with pytest.raises(ValueError, match="release_steps"):
+        NutAssemblyExpertConfig(release_steps=0)
+    with pytest.raises(RuntimeError, match="reset"):
+        NutAssemblyExpert().act(None)
+
+
+# ---------------------------------------------------------------------------- slow (simulation)
+
+
+@pytest.fixture(scope="module")
+def env():
+    import awda_bench.envs  # noqa: F401
+
+    e = gym.make("AWDA-NutAssembly-v1", obs_mode="state", reward_mode="none", num_envs=1)
+    yield e
+    e.close()
+
+
+def _nut_state(env) -> np.ndarray:
+    return torch.stack([n.pose.raw_pose for n in env.unwrapped.nuts], dim=1).cpu().numpy()
+
+
+@pytest.mark.slow
+def test_make_reset_step(env) -> None:
+    base = env.unwrapped
+    assert base.family == "nut_assembly" and base.num_variations == 9 and base.has_grasp_target
+    obs, info = env.reset(seed=0, options={"task": 5})
+    assert torch.isfinite(obs).all()
+    assert int(info["task"][0]) == 5 and not bool(info["success"][0])
+    assert int(base.target_nut_index[0]) == 1 and int(base.target_peg_index[0]) == 2
+    obs, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+    assert torch.isfinite(obs).all()
+    assert set(info) >= {"success", "success_once", "reached", "grasped", "xy_error_m"}
+    # nuts lie flat, handles roughly towards the robot
+    lay = base.layout
+    _, quat = base.nut_poses()
+    yaw = 2 * torch.atan2(quat[0, :, 3], quat[0, :, 0])
+    assert float(yaw.abs().max()) <= lay.max_yaw_rad + 1e-3
+
+
+@pytest.mark.slow
+def test_same_seed_same_layout_different_seed_different_layout(env) -> None:
+    env.reset(seed=11, options={"task": 3})
+    first = _nut_state(env)
+    env.reset(seed=12, options={"task": 3})
+    other = _nut_state(env)
+    env.reset(seed=11, options={"task": 3})
+    np.testing.assert_array_equal(first, _nut_state(env))
+    assert np.abs(first - other).max() > 1e-3
+
+
+@pytest.mark.slow
+def test_state_dict_round_trip_restores_scene_and_task(env) -> None:
+    base = env.unwrapped
+    env.reset(seed=4, options={"task": 8})
+    state = base.get_state_dict()
+    before = _nut_state(env)
+    qpos = base.agent.robot.get_qpos().clone()
+    for _ in range(5):
+        env.step(np.array([-1.0, 1.0, -1.0, 1.0], dtype=np.float32))
+    env.reset(seed=5, options={"task": 2})
+    base.set_state_dict(state)
+    np.testing.assert_allclose(_nut_state(env), before, atol=1e-6)
+    torch.testing.assert_close(base.agent.robot.get_qpos(), qpos)
+    assert int(base.task[0]) == 8
+
+
+@pytest.mark.slow
+def test_nan_action_and_bad_variation_are_rejected(env) -> None:
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.array([0.0, np.nan, 0.0, 0.0], dtype=np.float32))
+    with pytest.raises(UsageError, match="0..8"):
+        env.reset(seed=0, options={"task": -1})
+
+
+@pytest.mark.slow
+def test_success_needs_the_right_peg_the_bottom_and_the_gripper_away(env) -> None:
+    from mani_skill.utils.structs.pose import Pose
+
+    base = env.unwrapped
+    env.reset(seed=1, options={"task": 4})  # yellow nut, magenta peg
+    nut, spec = base.nuts[1], base.layout.nuts[1]
+    for j, peg in enumerate(base.layout.pegs):
+        x, y = peg.center_xy_m
+        nut.set_pose(Pose.create_from_pq(torch.tensor([[x, y, peg.base_z_m + spec.height_m / 2]])))
+        assert bool(base.evaluate()["success"][0]) == (j == 1)
+    x, y = base.layout.pegs[1].center_xy_m
+    z = base.layout.pegs[1].base_z_m + spec.height_m / 2
+    nut.set_pose(Pose.create_from_pq(torch.tensor([[x, y, z + 0.05]])))  # halfway up the peg
+    assert not bool(base.evaluate()["success"][0])
+    # down on the peg but the TCP at its handle (still held): not a success
+    tcp = base.agent.tcp_pose.p
+    grasp = torch.tensor([spec.grasp_point_m])
+    nut.set_pose(Pose.create_from_pq(tcp - grasp))
+    info = base.evaluate()
+    assert float(info["tcp_clearance_m"][0]) == pytest.approx(0.0, abs=1e-6)
+
+
+def _rollout(env, task: int, seed: int, horizon: int = 300) -> tuple[int, dict]:
+    expert = NutAssemblyExpert()
+    obs, _ = env.reset(seed=seed, options={"task": task})
+    spec = EpisodeSpec(suite="mosaic", task=task, episode=0, seed=seed, demo_seed=seed)
+    expert.reset(EpisodeContext(env=env.unwrapped, spec=spec))
+    info: dict = {}
+    for t in range(horizon):
+        action = expert.act(obs)
+        assert action.shape == (1, 4) and np.abs(action).max() <= 1.0
+        obs, _, _, _, info = env.step(action)
+        if expert.done:
+            return t + 1, info
+    return horizon, info
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("task", "seed"), [(0, 3), (8, 6)])
+def test_expert_puts_the_nut_on_the_peg_with_the_agent(env, task: int, seed: int) -> None:
+    steps, info = _rollout(env, task, seed)
+    assert steps < 250
+    for key in ("success", "success_once", "reached", "grasped"):
+        assert bool(info[key][0]), key
+    assert float(info["height_m"][0]) < 0.005
+
+
+@pytest.mark.slow
+def test_expert_drives_the_demonstrator() -> None:
+    import awda_bench.envs  # noqa: F401
+
+    e = gym.make(
+        "AWDA-NutAssembly-v1", robot_uids="awda_demonstrator", obs_mode="state", reward_mode="none"
+    )
+    try:
+        steps, info = _rollout(e, task=4, seed=2)
+        assert steps < 250 and bool(info["success"][0])
+    finally:
+        e.close()
