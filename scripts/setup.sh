@@ -64,11 +64,16 @@ ensure_renderer() {
   fi
 }
 
+TOX_REQS=('tox>=4.11' 'tox-ignore-env-name-mismatch>=0.2')
+
 ensure_tox() {
-  if "$PY" -m tox --version >/dev/null 2>&1; then return; fi
-  log "installing tox for $PY"
-  "$PY" -m pip install -q --disable-pip-version-check 'tox>=4.11' 2>/dev/null \
-    || "$PY" -m pip install -q --user --disable-pip-version-check 'tox>=4.11'
+  # the plugin lets every tox env reuse the one .venv (torch is installed once)
+  if "$PY" -m tox --version >/dev/null 2>&1 && "$PY" -c 'import tox_ignore_env_name_mismatch' 2>/dev/null; then
+    return
+  fi
+  log "installing ${TOX_REQS[*]} for $PY"
+  "$PY" -m pip install -q --disable-pip-version-check "${TOX_REQS[@]}" 2>/dev/null \
+    || "$PY" -m pip install -q --user --disable-pip-version-check "${TOX_REQS[@]}"
 }
 
 ensure_renderer
