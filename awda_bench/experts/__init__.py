@@ -9,6 +9,8 @@ import numpy as np
 
 from awda_bench.errors import UnknownChoiceError
 from awda_bench.experts.basketball import BasketballExpert
+from awda_bench.experts.door import DoorExpert
+from awda_bench.experts.drawer import DrawerExpert
 from awda_bench.experts.nut_assembly import NutAssemblyExpert
 from awda_bench.experts.pick_place import PickPlaceExpert, PickPlaceExpertConfig
 from awda_bench.experts.press_button import PressButtonExpert
@@ -27,6 +29,8 @@ FAMILY_EXPERTS: dict[str, Callable[[], Policy]] = {
     "stack_block": lambda: StackBlockExpert(name="scripted"),
     "basketball": lambda: BasketballExpert(name="scripted"),
     "nut_assembly": lambda: NutAssemblyExpert(name="scripted"),
+    "door": lambda: DoorExpert(name="scripted"),
+    "drawer": lambda: DrawerExpert(name="scripted"),
 }
 """Expert factory per task family (the env class's ``family`` attribute); one line per family."""
 
