@@ -1,0 +1,110 @@
+"""The AWDA waypoint network (seed S2): trunk + two multi-waypoint heads.
+
+Batch format (what a dataset's samples stack into; images RGB float in [0, 1], channels first)::
+
+    "demo":        (B, demo_frames, 3, H, W)   demonstration frames, first and last included
+    "first_frame": (B, 3, H, W)                the agent's first frame o_1
+    "trajectory":  (B, T, 3 + k)               ground truth: TCP xyz [m] + k attribute flags in [0, 1];
+                                               trajectory[:, 0] is the TCP at o_1 (polylines start there)
+    "head":        (B,) int64                  0 = task-driven sample, 1 = synthesized (trajectory synthesis)
+
+Output coordinate convention: waypoints live in whatever frame the ``trajectory`` targets are given
+in; this project's datasets use the ManiSkill **world frame, metres**, TCP position
+(``panda_hand_tcp``). The network emits xyz directly and k attribute logits;
+:meth:`AwdaNet.predict_waypoints` turns the logits into probabilities.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import numpy as np
+import torch
+from torch import nn
+
+from awda_bench.errors import UsageError
+from awda_bench.models.config import AwdaConfig
+from awda_bench.models.trunk import VisualTrunk
+from awda_bench.models.waypoint_loss import multi_waypoint_sdtw_loss, split_waypoint_sets
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+HEAD_NAMES: tuple[str, ...] = ("task", "synthesized")
+"""Head index -> name: 0 task-driven data, 1 trajectory synthesis."""
+
+
+class AwdaNet(nn.Module):
+    """Demo frames + o_1 -> 5 attributed waypoint sets (15 waypoints of 3 + k numbers)."""
+
+    arch = "awda"
+    """Architecture name recorded in snapshots."""
+
+    def __init__(self, config: AwdaConfig, load_backbone_weights: bool = True) -> None:
+        super().__init__()
+        self.config = config
+        self.trunk = VisualTrunk(config.trunk, load_backbone_weights)
+        out = config.total_waypoints * config.waypoint_dim
+        self.heads = nn.ModuleList(
+            nn.Sequential(
+                nn.Linear(config.trunk.feature_dim, config.head_hidden_dim),
+                nn.ReLU(),
+                nn.Linear(config.head_hidden_dim, out),
+            )
+            for _ in range(config.num_heads)
+        )
+
+    def forward(self, demo: torch.Tensor, first_frame: torch.Tensor, head: torch.Tensor) -> torch.Tensor:
+        """``demo (B, Td, 3, H, W)``, ``first_frame (B, 3, H, W)``, ``head (B,)`` ->
+        raw waypoints ``(B, 15, 3 + k)`` (xyz [m], attribute logits), sets flat in order 1..5."""
+        cfg = self.config
+        if demo.dim() != 5 or first_frame.dim() != 4 or demo.shape[1] != cfg.trunk.demo_frames:
+            raise UsageError(
+                f"expected demo (B, {cfg.trunk.demo_frames}, 3, H, W) and first_frame (B, 3, H, W); "
+                f"got {tuple(demo.shape)} and {tuple(first_frame.shape)}"
+            )
+        size = (cfg.trunk.image_height_px, cfg.trunk.image_width_px)
+        if tuple(demo.shape[-2:]) != size or tuple(first_frame.shape[-2:]) != size:
+            raise UsageError(
+                f"images must be {size[0]}x{size[1]} (config trunk.image_height_px/width_px); "
+                f"got demo {tuple(demo.shape[-2:])}, first frame {tuple(first_frame.shape[-2:])}"
+            )
+        frames = torch.cat((demo, first_frame.unsqueeze(1)), dim=1)
+        features = self.trunk(frames)[:, -1]  # o_1 is the last time step
+        b = features.shape[0]
+        if head.shape != (b,) or int(head.min()) < 0 or int(head.max()) >= cfg.num_heads:
+            raise UsageError(f"head indices must be shape ({b},) in [0, {cfg.num_heads}); got {head.tolist()}")
+        all_heads = torch.stack([h(features) for h in self.heads], dim=1)  # (B, heads, out)
+        chosen = all_heads[torch.arange(b, device=all_heads.device), head.long()]
+        return chosen.view(b, cfg.total_waypoints, cfg.waypoint_dim)
+
+    def compute_loss(self, batch: Mapping[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
+        """The multi-waypoint Soft-DTW loss of a batch (format in the module docstring)."""
+        cfg = self.config
+        waypoints = self(batch["demo"], batch["first_frame"], batch["head"])
+        loss, per_set = multi_waypoint_sdtw_loss(
+            waypoints,
+            batch["trajectory"],
+            num_sets=cfg.num_waypoint_sets,
+            points_per_segment=cfg.points_per_segment,
+            gamma=cfg.gamma,
+            attribute_scale=cfg.attribute_scale,
+        )
+        info = {"loss": float(loss.detach())}
+        info.update({f"sdtw_set{j + 1}": float(v) for j, v in enumerate(per_set.detach())})
+        return loss, info
+
+    def waypoint_sets(self, waypoints: torch.Tensor) -> list[torch.Tensor]:
+        """Split raw output ``(B, 15, 3 + k)`` into sets of 1..5 waypoints."""
+        return split_waypoint_sets(waypoints, self.config.num_waypoint_sets)
+
+    def predict_waypoints(
+        self, demo_frames: np.ndarray | torch.Tensor, first_frame: np.ndarray | torch.Tensor, head: str = "task"
+    ) -> np.ndarray:
+        """The largest waypoint set ``(5, 3 + k)``: xyz [m] + attribute probabilities.
+
+        See :func:`awda_bench.models.predict.predict_waypoints` for the accepted image formats.
+        """
+        from awda_bench.models.predict import predict_waypoints
+
+        return predict_waypoints(self, demo_frames, first_frame, head=head)

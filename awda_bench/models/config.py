@@ -1,0 +1,236 @@
+"""Frozen, validated configurations of the learned models (seed S2, Table S2) and their training.
+
+Every config validates itself in ``__post_init__``; a bad value raises
+:class:`awda_bench.errors.UsageError` naming the field, the value and what is allowed. Configs
+round-trip through plain dicts (:func:`config_to_dict` / :func:`config_from_dict`) so snapshots can
+store them without pickling classes.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import typing
+from dataclasses import dataclass, field
+from typing import Any, TypeVar
+
+from awda_bench.errors import UsageError
+
+BACKBONE_WEIGHT_CHOICES: tuple[str, ...] = ("imagenet", "none")
+"""Named backbone weight sources; any other value is read as a path to a local ``.pth`` file."""
+
+DEVICE_CHOICES: tuple[str, ...] = ("auto", "cpu", "cuda")
+"""``auto`` picks CUDA when ``torch.cuda.is_available()``, else the CPU."""
+
+
+def _check(ok: bool, owner: str, name: str, value: object, expected: str) -> None:
+    if not ok:
+        raise UsageError(f"{owner}.{name} = {value!r} is invalid; expected {expected}")
+
+
+@dataclass(frozen=True)
+class TrunkConfig:
+    """The shared visual trunk: ResNet-18 features -> positional encoding -> self-attention ->
+    spatial softmax -> per-frame MLP (identical for AWDA and T-OSVI)."""
+
+    image_height_px: int = 240
+    """Height [px] of every RGB frame (pick-and-place: 240; Meta-World: 224)."""
+    image_width_px: int = 320
+    """Width [px] of every RGB frame (pick-and-place: 320; Meta-World: 224)."""
+    demo_frames: int = 10
+    """Frames sampled from the demonstration video, first and last included (Table S2: 10)."""
+    backbone_weights: str = "imagenet"
+    """``imagenet`` (torchvision's IMAGENET1K_V1; needs the network or a warm torch hub cache),
+    ``none`` (random init) or a path to a local ResNet-18 ``state_dict`` file."""
+    attention_layers: int = 2
+    """Self-attention layers (Table S2: 2)."""
+    attention_heads: int = 4
+    """Heads per attention layer (Table S2: 4)."""
+    attention_head_dim: int = 64
+    """Channels of each head's query/key/value (the 1x1x1 ``Conv3d`` outputs ``heads * this``)."""
+    dropout: float = 0.1
+    """Dropout probability after each attention layer's output projection."""
+    hidden_dim: int = 256
+    """Hidden width of the post-transformer 2-layer MLP (Table S2: 256)."""
+    feature_dim: int = 256
+    """Length of the per-frame vector the MLP outputs (what the heads read)."""
+
+    def __post_init__(self) -> None:
+        o = "TrunkConfig"
+        _check(self.image_height_px >= 64, o, "image_height_px", self.image_height_px, "an int >= 64")
+        _check(self.image_width_px >= 64, o, "image_width_px", self.image_width_px, "an int >= 64")
+        _check(self.demo_frames >= 1, o, "demo_frames", self.demo_frames, "an int >= 1")
+        _check(
+            isinstance(self.backbone_weights, str) and self.backbone_weights != "",
+            o,
+            "backbone_weights",
+            self.backbone_weights,
+            f"one of {', '.join(BACKBONE_WEIGHT_CHOICES)} or a path to a .pth file",
+        )
+        _check(self.attention_layers >= 0, o, "attention_layers", self.attention_layers, "an int >= 0")
+        _check(self.attention_heads >= 1, o, "attention_heads", self.attention_heads, "an int >= 1")
+        _check(
+            self.attention_head_dim >= 1, o, "attention_head_dim", self.attention_head_dim, "an int >= 1"
+        )
+        _check(0.0 <= self.dropout < 1.0, o, "dropout", self.dropout, "a float in [0, 1)")
+        _check(self.hidden_dim >= 1, o, "hidden_dim", self.hidden_dim, "an int >= 1")
+        _check(self.feature_dim >= 1, o, "feature_dim", self.feature_dim, "an int >= 1")
+
+
+@dataclass(frozen=True)
+class AwdaConfig:
+    """The AWDA waypoint network and its multi-waypoint Soft-DTW loss."""
+
+    trunk: TrunkConfig = field(default_factory=TrunkConfig)
+    """Shared visual trunk."""
+    num_attributes: int = 1
+    """k: attributes per waypoint; attribute 0 is *object grasped*."""
+    num_waypoint_sets: int = 5
+    """Predicted sets have 1, 2, ..., this many waypoints (paper: 5 sets, 15 waypoints)."""
+    num_heads: int = 2
+    """Waypoint heads, chosen per sample: 0 = task-driven data, 1 = synthesized (1 = single head)."""
+    head_hidden_dim: int = 256
+    """Hidden width of each head's 2-layer MLP."""
+    points_per_segment: int = 12
+    """Interpolated points per polyline segment (5 segments x 12 + end point = 61 points)."""
+    gamma: float = 1e-3
+    """Soft-DTW temperature (Table S2: 0.001)."""
+    attribute_scale: float = 0.2
+    """Weight of the attribute channels against metres in the Soft-DTW cost (reference: 0.2)."""
+
+    def __post_init__(self) -> None:
+        o = "AwdaConfig"
+        _check(self.num_attributes >= 1, o, "num_attributes", self.num_attributes, "an int >= 1")
+        _check(
+            self.num_waypoint_sets >= 1, o, "num_waypoint_sets", self.num_waypoint_sets, "an int >= 1"
+        )
+        _check(self.num_heads >= 1, o, "num_heads", self.num_heads, "an int >= 1")
+        _check(self.head_hidden_dim >= 1, o, "head_hidden_dim", self.head_hidden_dim, "an int >= 1")
+        _check(
+            self.points_per_segment >= 1, o, "points_per_segment", self.points_per_segment, "an int >= 1"
+        )
+        _check(self.gamma > 0.0, o, "gamma", self.gamma, "a float > 0")
+        _check(self.attribute_scale >= 0.0, o, "attribute_scale", self.attribute_scale, "a float >= 0")
+
+    @property
+    def waypoint_dim(self) -> int:
+        """3 + k: xyz plus the attribute channels."""
+        return 3 + self.num_attributes
+
+    @property
+    def total_waypoints(self) -> int:
+        """1 + 2 + ... + num_waypoint_sets (15 for 5 sets)."""
+        return self.num_waypoint_sets * (self.num_waypoint_sets + 1) // 2
+
+
+@dataclass(frozen=True)
+class TosviConfig:
+    """The T-OSVI baseline: same trunk, action prediction from a frame stack, optional depth."""
+
+    trunk: TrunkConfig = field(default_factory=TrunkConfig)
+    """Shared visual trunk."""
+    frame_stack: int = 6
+    """Agent frames o_{t-5..t} placed after the demo frames (T-OSVI: 6)."""
+    action_dim: int = 4
+    """dx, dy, dz, grip, each in [-1, 1]."""
+    mixture_components: int = 3
+    """Logistic components per action dimension."""
+    action_bins: int = 256
+    """The discretization of [-1, 1] the mixture's likelihood is taken over."""
+    initial_scale: float = 0.05
+    """Scale every logistic component starts at (output bias), in action units."""
+    head_hidden_dim: int = 256
+    """Hidden width of the action and inverse-model MLPs."""
+    inverse_loss_weight: float = 1.0
+    """Weight of the inverse-model NLL (a_i from frames i, i+1) added to the policy NLL."""
+    use_depth: bool = False
+    """``+depth`` variant: a second ResNet-18 on the wrist depth image, fused before attention."""
+    depth_height_px: int = 128
+    """Wrist depth image height [px] (``use_depth`` only)."""
+    depth_width_px: int = 128
+    """Wrist depth image width [px] (``use_depth`` only)."""
+    max_depth_m: float = 2.0
+    """Depth [m] is clipped to [0, this] and scaled to [-1, 1] before its ResNet."""
+
+    def __post_init__(self) -> None:
+        o = "TosviConfig"
+        _check(self.frame_stack >= 2, o, "frame_stack", self.frame_stack, "an int >= 2")
+        _check(self.action_dim >= 1, o, "action_dim", self.action_dim, "an int >= 1")
+        _check(
+            self.mixture_components >= 1, o, "mixture_components", self.mixture_components, "an int >= 1"
+        )
+        _check(self.action_bins >= 2, o, "action_bins", self.action_bins, "an int >= 2")
+        _check(self.initial_scale > 0.0, o, "initial_scale", self.initial_scale, "a float > 0")
+        _check(self.head_hidden_dim >= 1, o, "head_hidden_dim", self.head_hidden_dim, "an int >= 1")
+        _check(
+            self.inverse_loss_weight >= 0.0,
+            o,
+            "inverse_loss_weight",
+            self.inverse_loss_weight,
+            "a float >= 0",
+        )
+        _check(self.depth_height_px >= 32, o, "depth_height_px", self.depth_height_px, "an int >= 32")
+        _check(self.depth_width_px >= 32, o, "depth_width_px", self.depth_width_px, "an int >= 32")
+        _check(self.max_depth_m > 0.0, o, "max_depth_m", self.max_depth_m, "a float > 0")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """The training loop (Table S2: Adam, lr 5e-4, batch 30; snapshots every 10k steps)."""
+
+    learning_rate: float = 5e-4
+    """Adam step size."""
+    batch_size: int = 30
+    """Samples per step."""
+    max_steps: int = 100_000
+    """Train until this global step (resuming counts the steps already done)."""
+    snapshot_every_steps: int = 10_000
+    """Write a snapshot when ``step % this == 0`` (and always at ``max_steps``)."""
+    seed: int = 0
+    """Seeds the batch order and, on a fresh start, torch/numpy/python RNGs (dropout)."""
+    device: str = "auto"
+    """``auto`` (CUDA when available), ``cpu`` or ``cuda``."""
+    resume: bool = True
+    """Continue from the latest snapshot in the snapshot directory when there is one."""
+
+    def __post_init__(self) -> None:
+        o = "TrainConfig"
+        _check(self.learning_rate > 0.0, o, "learning_rate", self.learning_rate, "a float > 0")
+        _check(self.batch_size >= 1, o, "batch_size", self.batch_size, "an int >= 1")
+        _check(self.max_steps >= 1, o, "max_steps", self.max_steps, "an int >= 1")
+        _check(
+            self.snapshot_every_steps >= 1,
+            o,
+            "snapshot_every_steps",
+            self.snapshot_every_steps,
+            "an int >= 1",
+        )
+        _check(self.device in DEVICE_CHOICES, o, "device", self.device, f"one of {DEVICE_CHOICES}")
+
+
+C = TypeVar("C")
+
+
+def config_to_dict(config: object) -> dict[str, Any]:
+    """A config (possibly nested) as plain dicts, ints, floats, strs and bools."""
+    if not dataclasses.is_dataclass(config) or isinstance(config, type):
+        raise TypeError(f"expected a config dataclass instance, got {type(config).__name__}")
+    return dataclasses.asdict(config)
+
+
+def config_from_dict(cls: type[C], data: dict[str, Any]) -> C:
+    """Rebuild ``cls`` from :func:`config_to_dict`'s output; unknown keys raise ``UsageError``."""
+    if not isinstance(data, dict):
+        raise UsageError(f"{cls.__name__} must be read from a dict, got {type(data).__name__}")
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls)]  # type: ignore[arg-type]
+    unknown = sorted(set(data) - set(names))
+    if unknown:
+        raise UsageError(f"{cls.__name__} has no field(s) {unknown}; valid: {', '.join(names)}")
+    kwargs: dict[str, Any] = {}
+    for name, value in data.items():
+        hint = hints[name]
+        if dataclasses.is_dataclass(hint) and isinstance(hint, type):
+            kwargs[name] = config_from_dict(hint, value)
+        else:
+            kwargs[name] = value
+    return cls(**kwargs)

@@ -1,0 +1,156 @@
+"""The T-OSVI baseline (Dasari & Gupta, 2020) on the shared trunk, with an optional ``+depth`` variant.
+
+Frames enter the trunk as ``[demo_1 .. demo_10, o_{t-5} .. o_t]`` (T-OSVI order). Two heads read the
+per-frame vectors ``f``:
+
+- policy: ``f(o_t)`` -> discretized logistic mixture over the 4-D action ``a_t``;
+- inverse model: ``[f(o_i), f(o_{i+1})]`` -> mixture over ``a_i`` for each consecutive pair in the
+  stack (the auxiliary loss of T-OSVI).
+
+``+depth`` (``use_depth``): a second ResNet-18 (1 input channel) encodes each agent frame's wrist
+depth image into a vector (global average pool), which is concatenated to every spatial cell of that
+frame's RGB features and mixed back to 512 channels by a 1x1 convolution, *before* the attention
+layers (late fusion). Demo frames have no depth; their depth vector is zero.
+
+Batch format (images RGB float in [0, 1], channels first; actions in [-1, 1])::
+
+    "demo":    (B, demo_frames, 3, H, W)
+    "frames":  (B, frame_stack, 3, H, W)          o_{t-5} .. o_t
+    "actions": (B, frame_stack, 4)                a_i taken at frame i: a_t is the policy target,
+                                                  a_{t-5} .. a_{t-1} the inverse-model targets
+    "depth":   (B, frame_stack, 1, Hd, Wd) [m]    only with use_depth
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import torch
+from torch import nn
+
+from awda_bench.errors import UsageError
+from awda_bench.models.backbone import FEATURE_CHANNELS, build_resnet18_features
+from awda_bench.models.config import TosviConfig
+from awda_bench.models.logistic_mixture import DiscretizedLogisticMixture
+from awda_bench.models.trunk import VisualTrunk
+
+if TYPE_CHECKING:
+    from collections.abc import Mapping
+
+
+def _mlp(inputs: int, hidden: int, outputs: int) -> nn.Sequential:
+    return nn.Sequential(nn.Linear(inputs, hidden), nn.ReLU(), nn.Linear(hidden, outputs))
+
+
+def _init_mixture_output(layer: nn.Module, config: TosviConfig) -> None:
+    """Start every component at scale ``config.initial_scale`` (log-scale bias), not PyTorch's ~1:
+    a logistic as wide as the whole action range gives the means almost no gradient."""
+    assert isinstance(layer, nn.Linear)
+    m = config.mixture_components
+    with torch.no_grad():
+        bias = layer.bias.view(config.action_dim, 3 * m)
+        bias[:, 2 * m :] = math.log(config.initial_scale)
+
+
+class TosviNet(nn.Module):
+    """Demo frames + a stack of agent frames (+ wrist depth) -> action distribution."""
+
+    def __init__(self, config: TosviConfig, load_backbone_weights: bool = True) -> None:
+        super().__init__()
+        self.config = config
+        self.trunk = VisualTrunk(config.trunk, load_backbone_weights)
+        params = config.action_dim * 3 * config.mixture_components
+        self.policy_head = _mlp(config.trunk.feature_dim, config.head_hidden_dim, params)
+        self.inverse_head = _mlp(2 * config.trunk.feature_dim, config.head_hidden_dim, params)
+        for head in (self.policy_head, self.inverse_head):
+            _init_mixture_output(head[-1], config)
+        self.depth_backbone: nn.Module | None = None
+        self.depth_fusion: nn.Module | None = None
+        if config.use_depth:
+            weights = config.trunk.backbone_weights if load_backbone_weights else "none"
+            self.depth_backbone = build_resnet18_features(weights, in_channels=1)
+            self.depth_fusion = nn.Conv2d(2 * FEATURE_CHANNELS, FEATURE_CHANNELS, kernel_size=1)
+
+    @property
+    def arch(self) -> str:
+        """Architecture name recorded in snapshots: ``tosvi`` or ``tosvi-depth``."""
+        return "tosvi-depth" if self.config.use_depth else "tosvi"
+
+    def _check_inputs(self, demo: torch.Tensor, frames: torch.Tensor, depth: torch.Tensor | None) -> None:
+        cfg = self.config
+        size = (cfg.trunk.image_height_px, cfg.trunk.image_width_px)
+        if demo.dim() != 5 or demo.shape[1] != cfg.trunk.demo_frames or tuple(demo.shape[-2:]) != size:
+            raise UsageError(f"demo must be (B, {cfg.trunk.demo_frames}, 3, {size[0]}, {size[1]}); got {tuple(demo.shape)}")
+        if frames.dim() != 5 or frames.shape[1] != cfg.frame_stack or tuple(frames.shape[-2:]) != size:
+            raise UsageError(f"frames must be (B, {cfg.frame_stack}, 3, {size[0]}, {size[1]}); got {tuple(frames.shape)}")
+        if cfg.use_depth:
+            dsize = (cfg.depth_height_px, cfg.depth_width_px)
+            if depth is None or depth.dim() != 5 or depth.shape[1:3] != (cfg.frame_stack, 1) or tuple(depth.shape[-2:]) != dsize:
+                got = None if depth is None else tuple(depth.shape)
+                raise UsageError(f"depth must be (B, {cfg.frame_stack}, 1, {dsize[0]}, {dsize[1]}) metres; got {got}")
+
+    def _fuse_depth(self, features: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
+        """RGB features ``(B, T, 512, h, w)`` + agent depth ``(B, S, 1, Hd, Wd)`` -> fused features."""
+        assert self.depth_backbone is not None and self.depth_fusion is not None
+        cfg = self.config
+        b, t, c, h, w = features.shape
+        s = depth.shape[1]
+        scaled = depth.clamp(0.0, cfg.max_depth_m) / cfg.max_depth_m * 2.0 - 1.0
+        depth_maps = self.depth_backbone(scaled.reshape(b * s, *depth.shape[2:]))
+        depth_vec = depth_maps.mean(dim=(-2, -1)).view(b, s, c)
+        demo_zeros = depth_vec.new_zeros(b, t - s, c)
+        per_frame = torch.cat((demo_zeros, depth_vec), dim=1)  # (B, T, 512)
+        stacked = torch.cat((features, per_frame[..., None, None].expand(-1, -1, -1, h, w)), dim=2)
+        fused = self.depth_fusion(stacked.reshape(b * t, 2 * c, h, w))
+        return fused.view(b, t, c, h, w)
+
+    def forward(
+        self, demo: torch.Tensor, frames: torch.Tensor, depth: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mixture parameters: policy ``(B, A, 3M)`` for a_t, inverse ``(B, S-1, A, 3M)``."""
+        self._check_inputs(demo, frames, depth)
+        cfg = self.config
+        all_frames = torch.cat((demo, frames), dim=1)
+        features = self.trunk.frame_features(all_frames)
+        if cfg.use_depth:
+            assert depth is not None
+            features = self._fuse_depth(features, depth)
+        vectors = self.trunk.temporal(features)[:, -cfg.frame_stack :]  # (B, S, F)
+        b, s = vectors.shape[:2]
+        policy = self.policy_head(vectors[:, -1]).view(b, cfg.action_dim, -1)
+        pairs = torch.cat((vectors[:, :-1], vectors[:, 1:]), dim=-1)
+        inverse = self.inverse_head(pairs).view(b, s - 1, cfg.action_dim, -1)
+        return policy, inverse
+
+    def distribution(self, params: torch.Tensor) -> DiscretizedLogisticMixture:
+        return DiscretizedLogisticMixture(params, bins=self.config.action_bins)
+
+    def compute_loss(self, batch: Mapping[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
+        """Policy NLL of a_t + ``inverse_loss_weight`` x inverse-model NLL of a_{t-5..t-1}.
+
+        NLLs are summed over action dimensions and averaged over samples (and pairs) [nats].
+        """
+        policy, inverse = self(batch["demo"], batch["frames"], batch.get("depth"))
+        actions = batch["actions"]
+        policy_nll = -self.distribution(policy).log_prob(actions[:, -1]).sum(-1).mean()
+        inverse_nll = -self.distribution(inverse).log_prob(actions[:, :-1]).sum(-1).mean()
+        loss = policy_nll + self.config.inverse_loss_weight * inverse_nll
+        return loss, {
+            "loss": float(loss.detach()),
+            "policy_nll": float(policy_nll.detach()),
+            "inverse_nll": float(inverse_nll.detach()),
+        }
+
+    @torch.no_grad()
+    def predict_action(
+        self, demo: torch.Tensor, frames: torch.Tensor, depth: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """Mean action ``(B, 4)`` in [-1, 1] (eval mode for the call)."""
+        was_training = self.training
+        self.eval()
+        try:
+            policy, _ = self(demo, frames, depth)
+        finally:
+            self.train(was_training)
+        return self.distribution(policy).mean()

@@ -1,0 +1,81 @@
+"""Soft-DTW against brute-force dynamic programming, plain DTW, gradcheck and small-gamma stability."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from awda_bench.errors import UsageError
+from awda_bench.models.soft_dtw import soft_dtw, soft_dtw_divergence, squared_euclidean_cost
+
+
+def _reference(cost: list[list[float]], gamma: float) -> float:
+    """Textbook recursion, one cell at a time in Python floats (gamma = 0: plain DTW)."""
+    n, m = len(cost), len(cost[0])
+    r = [[math.inf] * (m + 1) for _ in range(n + 1)]
+    r[0][0] = 0.0
+    for i in range(1, n + 1):
+        for j in range(1, m + 1):
+            prev = (r[i - 1][j - 1], r[i - 1][j], r[i][j - 1])
+            low = min(prev)
+            soft = low if gamma == 0 else low - gamma * math.log(sum(math.exp(-(v - low) / gamma) for v in prev))
+            r[i][j] = cost[i - 1][j - 1] + soft
+    return r[n][m]
+
+
+@pytest.mark.parametrize("gamma", [1.0, 1e-3])
+def test_matches_brute_force_reference(gamma: float) -> None:
+    g = torch.Generator().manual_seed(0)
+    x = torch.randn(5, 9, 3, generator=g, dtype=torch.float64)
+    y = torch.randn(5, 7, 3, generator=g, dtype=torch.float64)
+    values = soft_dtw(x, y, gamma)
+    cost = squared_euclidean_cost(x, y)
+    expected = torch.tensor([_reference(cost[b].tolist(), gamma) for b in range(5)], dtype=torch.float64)
+    assert torch.max(torch.abs(values - expected)) <= 1e-5
+
+
+def test_tends_to_plain_dtw_as_gamma_goes_to_zero() -> None:
+    g = torch.Generator().manual_seed(1)
+    x = torch.randn(4, 8, 2, generator=g, dtype=torch.float64)
+    y = torch.randn(4, 11, 2, generator=g, dtype=torch.float64)
+    cost = squared_euclidean_cost(x, y)
+    dtw = torch.tensor([_reference(cost[b].tolist(), 0.0) for b in range(4)], dtype=torch.float64)
+    gaps = [torch.max(torch.abs(soft_dtw(x, y, gamma) - dtw)).item() for gamma in (1e-1, 1e-2, 1e-4)]
+    # soft-DTW <= DTW and DTW - soft-DTW <= gamma * log(3) * (n + m): the gap shrinks with gamma.
+    assert gaps[0] > gaps[1] > gaps[2]
+    assert gaps[2] <= 1e-4 * math.log(3) * (8 + 11)
+
+
+def test_identical_sequences_cost_nothing_with_hard_dtw_limit() -> None:
+    x = torch.rand(2, 6, 3, dtype=torch.float64)
+    assert torch.allclose(soft_dtw(x, x, 1e-6), torch.zeros(2, dtype=torch.float64), atol=1e-4)
+    assert torch.all(soft_dtw_divergence(x, x + 0.1, 1e-3) > 0)
+
+
+@pytest.mark.parametrize("gamma", [1.0, 0.1, 1e-3])
+def test_gradients_pass_gradcheck(gamma: float) -> None:
+    g = torch.Generator().manual_seed(2)
+    x = torch.randn(2, 5, 3, generator=g, dtype=torch.float64, requires_grad=True)
+    y = torch.randn(2, 4, 3, generator=g, dtype=torch.float64, requires_grad=True)
+    assert torch.autograd.gradcheck(lambda a, b: soft_dtw(a, b, gamma), (x, y))
+
+
+def test_gamma_0001_on_60_by_50_is_finite_with_finite_gradients() -> None:
+    g = torch.Generator().manual_seed(3)
+    x = torch.rand(3, 60, 4, generator=g, requires_grad=True)
+    y = torch.rand(3, 50, 4, generator=g, requires_grad=True)
+    value = soft_dtw(x, y, 1e-3)
+    value.sum().backward()
+    assert torch.isfinite(value).all()
+    assert x.grad is not None and y.grad is not None
+    assert torch.isfinite(x.grad).all() and torch.isfinite(y.grad).all()
+    assert x.grad.abs().sum() > 0
+
+
+def test_bad_shapes_and_gamma_are_refused() -> None:
+    with pytest.raises(UsageError, match="gamma"):
+        soft_dtw(torch.rand(1, 3, 2), torch.rand(1, 3, 2), 0.0)
+    with pytest.raises(UsageError, match="soft-DTW needs"):
+        soft_dtw(torch.rand(1, 3, 2), torch.rand(1, 3, 3))
