@@ -84,7 +84,14 @@ class MinkEEPosController(PDJointPosController):
             self.last_target_pos[i] = target
             self.last_ik_error[i] = error
         self._target_qpos = torch.as_tensor(targets, dtype=self._start_qpos.dtype, device=self.device)
-        self.set_drive_targets(self._target_qpos)
+        if self.scene.gpu_sim_enabled:
+            self.set_drive_targets(self._target_qpos)
+        else:
+            # CPU sim: one SAPIEN call per joint and sub-scene, skipping ManiSkill's per-joint tensor
+            # conversions (measured ~0.1 ms/step); same effect as set_drive_targets.
+            for i, joint in enumerate(self.joints):
+                for env_index, physx_joint in enumerate(joint._objs):
+                    physx_joint.set_drive_target(float(targets[env_index, i]))
 
 
 @dataclass
