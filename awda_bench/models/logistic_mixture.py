@@ -66,6 +66,11 @@ class DiscretizedLogisticMixture:
         """Mixture mean ``(..., D)``, clipped to [low, high]."""
         return (self.log_weights.exp() * self.means).sum(-1).clamp(self.low, self.high)
 
+    def mode(self) -> torch.Tensor:
+        """Mean of the most probable component ``(..., D)`` (the peak of a well-separated mixture)."""
+        best = self.log_weights.argmax(dim=-1, keepdim=True)
+        return self.means.gather(-1, best).squeeze(-1).clamp(self.low, self.high)
+
     def sample(self, generator: torch.Generator | None = None) -> torch.Tensor:
         """One sample per dimension ``(..., D)``, clipped to [low, high]."""
         weights = self.log_weights.exp()

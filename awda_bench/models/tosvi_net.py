@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING
 import torch
 from torch import nn
 
-from awda_bench.errors import UsageError
+from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.models.backbone import FEATURE_CHANNELS, build_resnet18_features
 from awda_bench.models.config import TosviConfig
 from awda_bench.models.logistic_mixture import DiscretizedLogisticMixture
@@ -144,13 +144,21 @@ class TosviNet(nn.Module):
 
     @torch.no_grad()
     def predict_action(
-        self, demo: torch.Tensor, frames: torch.Tensor, depth: torch.Tensor | None = None
+        self,
+        demo: torch.Tensor,
+        frames: torch.Tensor,
+        depth: torch.Tensor | None = None,
+        statistic: str = "mode",
     ) -> torch.Tensor:
-        """Mean action ``(B, 4)`` in [-1, 1] (eval mode for the call)."""
+        """Action ``(B, 4)`` in [-1, 1] (eval mode for the call): ``mode`` (the most probable
+        component's mean) or ``mean`` (the mixture mean; the paper tried both, S3)."""
+        if statistic not in ("mode", "mean"):
+            raise UnknownChoiceError("action statistic", statistic, ("mode", "mean"))
         was_training = self.training
         self.eval()
         try:
             policy, _ = self(demo, frames, depth)
         finally:
             self.train(was_training)
-        return self.distribution(policy).mean()
+        dist = self.distribution(policy)
+        return dist.mode() if statistic == "mode" else dist.mean()
