@@ -125,11 +125,6 @@ def test_make_reset_step_default_agent(env) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="panda_awda's BinaryGripperController.get_state() is empty until the first action "
-    "(awda_bench/robot/controller.py), so the flat observation grows by one after reset",
-)
 def test_observation_size_is_constant(env) -> None:
     obs, _ = env.reset(seed=0)
     obs_step, *_ = env.step(np.zeros(4, dtype=np.float32))

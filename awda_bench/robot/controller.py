@@ -132,27 +132,32 @@ class BinaryGripperController(PDJointPosMimicController):
 
     config: BinaryGripperControllerConfig
     _closed: torch.Tensor | None = None
+    """(n, 1) commanded state: True = closed (set at every reset, so always present after one)."""
 
     def _initialize_action_space(self) -> None:
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
 
     def reset(self) -> None:
         super().reset()
-        self._closed = None
+        # envs being reset start open (the rest keyframe's fingers), and their drive targets must
+        # say so: a drive target left closed by the previous episode would otherwise persist.
+        if self._closed is None:
+            closed = torch.zeros((self.scene.num_envs, 1), dtype=torch.bool, device=self.device)
+        else:
+            closed = self._closed.clone()
+            closed[self.scene._reset_mask] = False
+        self._apply(closed)
 
     def get_state(self) -> dict:
-        if self._closed is None:
-            return {}
         return {"closed": self._closed.clone()}
 
     def set_state(self, state: dict) -> None:
-        self._closed = None
         if "closed" in state:
-            self._apply(state["closed"].to(self.device))
+            self._apply(state["closed"].to(self.device).bool())
 
     def set_action(self, action: torch.Tensor) -> None:
         closed = action[:, :1] > 0
-        if self._closed is not None and torch.equal(closed, self._closed):
+        if torch.equal(closed, self._closed):
             return
         self._apply(closed)
 
