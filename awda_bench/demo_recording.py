@@ -35,11 +35,12 @@ SETTLE_STEPS = 5
 """Control steps recorded after the expert is done (the released object comes to rest)."""
 
 
-def make_demo_env(suite: Suite | str, embodiment: str = "demonstrator") -> Any:
-    """The suite's env with ``embodiment``'s robot (state observations, no reward, one env).
+def make_demo_env(suite: Suite | str, embodiment: str = "demonstrator", env_id: str | None = None) -> Any:
+    """One of the suite's envs (default its main ``env_id``) with ``embodiment``'s robot (state
+    observations, no reward, one env).
 
     Build it once and pass it to :func:`record_demo` for every demo: a camera's first capture
-    costs seconds (render pipeline build).
+    costs seconds (render pipeline build). Suites mixing families use :func:`demo_env_for`.
     """
     import awda_bench.envs  # noqa: F401  (registers the envs and robots)
     from awda_bench.envs.embodiments import embodiment as lookup
@@ -50,7 +51,7 @@ def make_demo_env(suite: Suite | str, embodiment: str = "demonstrator") -> Any:
         raise UnknownChoiceError("embodiment", embodiment, EMBODIMENT_NAMES)
     uid = EMBODIMENT_UIDS[embodiment]
     return gym.make(
-        suite.env_id,
+        env_id or suite.env_id,
         robot_uids=uid,
         control_mode=lookup(uid).control_mode,
         obs_mode="state",
@@ -59,6 +60,15 @@ def make_demo_env(suite: Suite | str, embodiment: str = "demonstrator") -> Any:
         max_episode_steps=suite.horizon_steps,
         sensor_configs={THIRD_PERSON: {"height": suite.camera.height, "width": suite.camera.width}},
     )
+
+
+def demo_env_for(cache: dict[tuple[str, str], Any], suite: Suite, task: int, embodiment: str) -> Any:
+    """The env serving suite task ``task`` for ``embodiment``, built once per (env id, embodiment)
+    and kept in ``cache``."""
+    key = (suite.env_id_for(task), embodiment)
+    if key not in cache:
+        cache[key] = make_demo_env(suite, embodiment, env_id=key[0])
+    return cache[key]
 
 
 def _capture(env: Any) -> np.ndarray:
@@ -88,13 +98,16 @@ def record_demo(
     suite.task(task)  # unknown task -> UnknownChoiceError
     if render_every < 1:
         raise UsageError(f"render_every must be >= 1, got {render_every}")
+    env_id = suite.env_id_for(task)
     if env is None:
-        env = make_demo_env(suite, embodiment)
+        env = make_demo_env(suite, embodiment, env_id=env_id)
     base = env.unwrapped
     if base.robot_uids != EMBODIMENT_UIDS.get(embodiment):
         raise UsageError(f"env has robot {base.robot_uids!r}, not the {embodiment!r} embodiment")
+    if env.spec is not None and env.spec.id != env_id:
+        raise UsageError(f"task {task} of suite {suite.name!r} runs in {env_id}, not in {env.spec.id}")
     expert = make_expert(suite.name, embodiment)
-    obs, info = env.reset(seed=seed, options={"task": task})
+    obs, info = env.reset(seed=seed, options={"task": suite.task(task).reset_task})
     spec = EpisodeSpec(suite=suite.name, task=task, episode=0, seed=seed, demo_seed=seed)
     expert.reset(EpisodeContext(env=base, spec=spec))
 

@@ -53,7 +53,7 @@ def _time_expert(env, suite, task: int, episodes: int) -> tuple[int, float, floa
         expert = make_expert(
             suite.name, "agent" if base.robot_uids == "panda_awda" else "demonstrator"
         )
-        obs, _ = env.reset(seed=seed, options={"task": task})
+        obs, _ = env.reset(seed=seed, options={"task": suite.task(task).reset_task})
         expert.reset(EpisodeContext(env=base, spec=EpisodeSpec(suite.name, task, seed, seed, seed)))
         start = time.perf_counter()
         for _ in range(suite.horizon_steps):
@@ -69,17 +69,18 @@ def _time_expert(env, suite, task: int, episodes: int) -> tuple[int, float, floa
 
 
 def run_env_bench(args: argparse.Namespace) -> int:
-    from awda_bench.demo_recording import THIRD_PERSON, make_demo_env, record_demo
+    from awda_bench.demo_recording import THIRD_PERSON, demo_env_for, record_demo
     from awda_bench.robot.cameras import capture_rgb
     from awda_bench.suites import load_suite
 
     suite = load_suite(args.suite)
     suite.task(args.task)
     t0 = time.perf_counter()
-    env = make_demo_env(suite, args.embodiment)
-    env.reset(seed=0, options={"task": args.task})
+    envs: dict[tuple[str, str], Any] = {}
+    env = demo_env_for(envs, suite, args.task, args.embodiment)
+    env.reset(seed=0, options={"task": suite.task(args.task).reset_task})
     print(
-        f"env {suite.env_id} robot={env.unwrapped.robot_uids}: "
+        f"env {suite.env_id_for(args.task)} robot={env.unwrapped.robot_uids}: "
         f"make + first reset {time.perf_counter() - t0:.2f} s"
     )
 
@@ -120,7 +121,8 @@ def run_env_bench(args: argparse.Namespace) -> int:
         for task in tasks:
             per_task: list[dict[str, Any]] = []
             for seed in range(args.sweep_seeds):
-                _, traj = record_demo(suite, task, seed, args.embodiment, frames=False, env=env)
+                task_env = demo_env_for(envs, suite, task, args.embodiment)
+                _, traj = record_demo(suite, task, seed, args.embodiment, frames=False, env=task_env)
                 m = traj.meta
                 row = {
                     k: m[k]

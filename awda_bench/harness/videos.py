@@ -62,13 +62,13 @@ def record_demo_frames(
 ) -> list[np.ndarray]:
     """The demonstrator's video of ``(task, demo_seed)``, subsampled to :data:`DEMO_FRAMES` frames.
 
-    The demo env is built once per ``cache`` (its first camera capture costs seconds).
+    The demo envs are built once per ``cache`` (one per env id) (its first camera capture costs seconds).
     """
-    from awda_bench.demo_recording import make_demo_env, record_demo
+    from awda_bench.demo_recording import demo_env_for, record_demo
 
-    if "demo_env" not in cache:
-        cache["demo_env"] = make_demo_env(suite)
-    frames, _ = record_demo(suite, task, demo_seed, render_every=4, env=cache["demo_env"])
+    envs = cache.setdefault("demo_envs", {})
+    env = demo_env_for(envs, suite, task, "demonstrator")
+    frames, _ = record_demo(suite, task, demo_seed, render_every=4, env=env)
     assert frames is not None
     index = np.linspace(0, len(frames) - 1, min(DEMO_FRAMES, len(frames))).round().astype(int)
     return [frames[i] for i in index]

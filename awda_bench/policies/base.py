@@ -28,7 +28,8 @@ class EpisodeSpec:
     suite: str
     """Suite name."""
     task: int
-    """Task (variation) index passed to ``env.reset(options={"task": task})``."""
+    """Suite-wide task index; its env receives ``suite.task(task).reset_task`` as
+    ``options["task"]`` (the variation, for suites mixing families)."""
     episode: int
     """Episode index within the task (0-based)."""
     seed: int
