@@ -22,7 +22,9 @@ torch.set_num_threads(1)
 
 
 def _config(h: int = 64, w: int = 64, demo_frames: int = 2, **kw: object) -> AwdaConfig:
-    trunk = TrunkConfig(image_height_px=h, image_width_px=w, demo_frames=demo_frames, backbone_weights="none")
+    trunk = TrunkConfig(
+        image_height_px=h, image_width_px=w, demo_frames=demo_frames, backbone_weights="none"
+    )
     return AwdaConfig(trunk=trunk, **kw)  # type: ignore[arg-type]
 
 
@@ -41,10 +43,14 @@ def test_each_sample_uses_the_head_its_index_names() -> None:
     model = AwdaNet(_config()).eval()
     demo, first = torch.rand(1, 2, 3, 64, 64), torch.rand(1, 3, 64, 64)
     with torch.no_grad():
-        both = model(demo.expand(2, -1, -1, -1, -1), first.expand(2, -1, -1, -1), torch.tensor([0, 1]))
+        both = model(
+            demo.expand(2, -1, -1, -1, -1), first.expand(2, -1, -1, -1), torch.tensor([0, 1])
+        )
         only0 = model(demo, first, torch.tensor([0]))
         only1 = model(demo, first, torch.tensor([1]))
-    assert torch.allclose(both[0], only0[0], atol=1e-5) and torch.allclose(both[1], only1[0], atol=1e-5)
+    assert torch.allclose(both[0], only0[0], atol=1e-5) and torch.allclose(
+        both[1], only1[0], atol=1e-5
+    )
     assert not torch.allclose(only0, only1)
     with pytest.raises(UsageError, match="head indices"):
         model(demo, first, torch.tensor([2]))
@@ -61,13 +67,19 @@ def test_polyline_starts_at_start_passes_every_waypoint_and_is_linear() -> None:
     wps = torch.tensor([[[1.0, 0.0, 0.0, 1.0], [1.0, 2.0, 0.0, 1.0]]])
     line = interpolate_polyline(start, wps, points_per_segment=4)
     assert line.shape == (1, 2 * 4 + 1, 4)
-    assert torch.equal(line[0, 0], start[0]) and torch.equal(line[0, 4], wps[0, 0]) and torch.equal(line[0, -1], wps[0, 1])
+    assert (
+        torch.equal(line[0, 0], start[0])
+        and torch.equal(line[0, 4], wps[0, 0])
+        and torch.equal(line[0, -1], wps[0, 1])
+    )
     assert torch.allclose(line[0, 2], torch.tensor([0.5, 0.0, 0.0, 0.5]))
     sets = split_waypoint_sets(torch.arange(15.0).view(1, 15, 1), 5)
     assert [s.flatten().tolist() for s in sets][2] == [3.0, 4.0, 5.0]
 
 
-def test_imagenet_weights_offline_raise_one_line_error_naming_the_alternative(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_imagenet_weights_offline_raise_one_line_error_naming_the_alternative(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
     def offline(*args: object, **kwargs: object) -> None:
         raise urllib.error.URLError("[Errno -3] Temporary failure in name resolution")
 
@@ -120,10 +132,18 @@ def test_overfits_a_tiny_batch_and_predicts_its_waypoints() -> None:
     negative). Paper optimizer settings (Adam, lr 5e-4); dropout off to overfit."""
     torch.manual_seed(0)
     cfg = AwdaConfig(
-        trunk=TrunkConfig(image_height_px=64, image_width_px=64, demo_frames=1, backbone_weights="none", dropout=0.0)
+        trunk=TrunkConfig(
+            image_height_px=64,
+            image_width_px=64,
+            demo_frames=1,
+            backbone_weights="none",
+            dropout=0.0,
+        )
     )
     model = AwdaNet(cfg)
-    data = SyntheticWaypointDataset(2, height_px=64, width_px=64, demo_frames=1, num_waypoints=1, grasped=(0,))
+    data = SyntheticWaypointDataset(
+        2, height_px=64, width_px=64, demo_frames=1, num_waypoints=1, grasped=(0,)
+    )
     batch = default_collate([data[i] for i in range(2)])
     optimizer = torch.optim.Adam(model.parameters(), lr=5e-4)
     losses = []

@@ -1,4 +1,4 @@
-"""Snapshot files: bit-exact round trip, ordering by step, refusal of other architectures and corrupt files."""
+"""Snapshot files: bit-exact round trip, order by step, refusal of other archs and corrupt files."""
 
 from __future__ import annotations
 
@@ -12,7 +12,13 @@ from torch.utils.data import default_collate
 from awda_bench.errors import CorruptFileError
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig, TosviConfig, TrunkConfig
-from awda_bench.models.snapshot import list_snapshots, load_snapshot, restore, save_snapshot, snapshot_path
+from awda_bench.models.snapshot import (
+    list_snapshots,
+    load_snapshot,
+    restore,
+    save_snapshot,
+    snapshot_path,
+)
 from awda_bench.models.synthetic import SyntheticWaypointDataset
 from awda_bench.models.tosvi_net import TosviNet
 
@@ -49,8 +55,14 @@ def test_round_trip_is_bit_exact(tmp_path: Path) -> None:
     fresh = AwdaNet(AwdaConfig(trunk=TRUNK))
     fresh_opt = torch.optim.Adam(fresh.parameters(), lr=5e-4)
     restore(fresh, snap, fresh_opt)
-    for (_, a), (_, b) in zip(optimizer.state_dict()["state"].items(), fresh_opt.state_dict()["state"].items(), strict=True):
-        assert torch.equal(a["exp_avg"], b["exp_avg"]) and torch.equal(a["exp_avg_sq"], b["exp_avg_sq"])
+    for (_, a), (_, b) in zip(
+        optimizer.state_dict()["state"].items(),
+        fresh_opt.state_dict()["state"].items(),
+        strict=True,
+    ):
+        assert torch.equal(a["exp_avg"], b["exp_avg"]) and torch.equal(
+            a["exp_avg_sq"], b["exp_avg_sq"]
+        )
 
 
 def test_snapshots_listed_by_step_and_other_files_ignored(tmp_path: Path) -> None:
@@ -72,8 +84,16 @@ def test_other_architecture_is_refused(tmp_path: Path) -> None:
     with pytest.raises(CorruptFileError, match="holds a 'tosvi' model, not 'awda'") as info:
         restore(AwdaNet(AwdaConfig(trunk=TRUNK)), load_snapshot(path))
     assert "\n" not in str(info.value)
-    other_size = AwdaNet(AwdaConfig(trunk=TrunkConfig(image_height_px=96, image_width_px=64, demo_frames=1, backbone_weights="none")))
-    awda_path = save_snapshot(tmp_path / "snapshot-000000002.pt", AwdaNet(AwdaConfig(trunk=TRUNK)), step=2)
+    other_size = AwdaNet(
+        AwdaConfig(
+            trunk=TrunkConfig(
+                image_height_px=96, image_width_px=64, demo_frames=1, backbone_weights="none"
+            )
+        )
+    )
+    awda_path = save_snapshot(
+        tmp_path / "snapshot-000000002.pt", AwdaNet(AwdaConfig(trunk=TRUNK)), step=2
+    )
     with pytest.raises(CorruptFileError, match="trunk.image_height_px"):
         restore(other_size, load_snapshot(awda_path))
 
@@ -85,7 +105,7 @@ def test_corrupt_file_raises_one_line_corrupt_file_error(tmp_path: Path, damage:
         path.write_bytes(b"\x00not a torch file" * 10)
     elif damage == "truncated":
         save_snapshot(path, AwdaNet(AwdaConfig(trunk=TRUNK)), step=1)
-        path.write_bytes(path.read_bytes()[: 50_000])
+        path.write_bytes(path.read_bytes()[:50_000])
     else:
         torch.save({"weights": torch.zeros(3)}, path)
     with pytest.raises(CorruptFileError) as info:

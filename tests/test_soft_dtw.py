@@ -1,4 +1,4 @@
-"""Soft-DTW against brute-force dynamic programming, plain DTW, gradcheck and small-gamma stability."""
+"""Soft-DTW against a brute-force DP, plain DTW, gradcheck and small-gamma stability."""
 
 from __future__ import annotations
 
@@ -20,7 +20,11 @@ def _reference(cost: list[list[float]], gamma: float) -> float:
         for j in range(1, m + 1):
             prev = (r[i - 1][j - 1], r[i - 1][j], r[i][j - 1])
             low = min(prev)
-            soft = low if gamma == 0 else low - gamma * math.log(sum(math.exp(-(v - low) / gamma) for v in prev))
+            soft = (
+                low
+                if gamma == 0
+                else low - gamma * math.log(sum(math.exp(-(v - low) / gamma) for v in prev))
+            )
             r[i][j] = cost[i - 1][j - 1] + soft
     return r[n][m]
 
@@ -32,7 +36,9 @@ def test_matches_brute_force_reference(gamma: float) -> None:
     y = torch.randn(5, 7, 3, generator=g, dtype=torch.float64)
     values = soft_dtw(x, y, gamma)
     cost = squared_euclidean_cost(x, y)
-    expected = torch.tensor([_reference(cost[b].tolist(), gamma) for b in range(5)], dtype=torch.float64)
+    expected = torch.tensor(
+        [_reference(cost[b].tolist(), gamma) for b in range(5)], dtype=torch.float64
+    )
     assert torch.max(torch.abs(values - expected)) <= 1e-5
 
 
@@ -42,7 +48,9 @@ def test_tends_to_plain_dtw_as_gamma_goes_to_zero() -> None:
     y = torch.randn(4, 11, 2, generator=g, dtype=torch.float64)
     cost = squared_euclidean_cost(x, y)
     dtw = torch.tensor([_reference(cost[b].tolist(), 0.0) for b in range(4)], dtype=torch.float64)
-    gaps = [torch.max(torch.abs(soft_dtw(x, y, gamma) - dtw)).item() for gamma in (1e-1, 1e-2, 1e-4)]
+    gaps = [
+        torch.max(torch.abs(soft_dtw(x, y, gamma) - dtw)).item() for gamma in (1e-1, 1e-2, 1e-4)
+    ]
     # soft-DTW <= DTW and DTW - soft-DTW <= gamma * log(3) * (n + m): the gap shrinks with gamma.
     assert gaps[0] > gaps[1] > gaps[2]
     assert gaps[2] <= 1e-4 * math.log(3) * (8 + 11)

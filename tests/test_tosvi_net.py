@@ -16,7 +16,9 @@ torch.set_num_threads(1)
 
 
 def _config(**kw: object) -> TosviConfig:
-    trunk = TrunkConfig(image_height_px=64, image_width_px=64, demo_frames=1, backbone_weights="none", dropout=0.0)
+    trunk = TrunkConfig(
+        image_height_px=64, image_width_px=64, demo_frames=1, backbone_weights="none", dropout=0.0
+    )
     return TosviConfig(trunk=trunk, frame_stack=2, depth_height_px=32, depth_width_px=32, **kw)  # type: ignore[arg-type]
 
 
@@ -48,7 +50,9 @@ def test_depth_variant_reads_depth_and_needs_it() -> None:
     torch.manual_seed(0)
     model = TosviNet(_config(use_depth=True)).eval()
     assert model.arch == "tosvi-depth"
-    data = SyntheticActionDataset(1, height_px=64, width_px=64, demo_frames=1, frame_stack=2, depth_size=(32, 32))
+    data = SyntheticActionDataset(
+        1, height_px=64, width_px=64, demo_frames=1, frame_stack=2, depth_size=(32, 32)
+    )
     batch = default_collate([data[0]])
     with torch.no_grad():
         near, _ = model(batch["demo"], batch["frames"], torch.full_like(batch["depth"], 0.3))
@@ -60,14 +64,16 @@ def test_depth_variant_reads_depth_and_needs_it() -> None:
     loss, _ = model.compute_loss(batch)
     loss.backward()
     assert model.depth_backbone is not None
-    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in model.depth_backbone.parameters())
+    assert any(
+        p.grad is not None and p.grad.abs().sum() > 0 for p in model.depth_backbone.parameters()
+    )
 
 
 @pytest.mark.slow
 def test_overfits_a_tiny_batch_of_actions() -> None:
     """NLL down >= 90 % and the mean action then matches the targets. 32 action bins (half-width
-    0.03) instead of 256: with 256, Adam's lr-sized weight jitter (5e-4) is of the order of a bin and
-    the NLL oscillates for hundreds more steps."""
+    0.03) instead of 256: with 256, Adam's lr-sized weight jitter (5e-4) is of the order of a bin
+    and the NLL oscillates for hundreds more steps."""
     torch.manual_seed(0)
     model = TosviNet(_config(action_bins=32))
     data = SyntheticActionDataset(2, height_px=64, width_px=64, demo_frames=1, frame_stack=2)

@@ -3,4 +3,4 @@
 :data:`COMMANDS` is the order they are listed in ``python -m awda_bench --help``.
 """
 
-COMMANDS: tuple[str, ...] = ("doctor", "run", "report", "bench", "demo")
+COMMANDS: tuple[str, ...] = ("doctor", "run", "report", "bench", "demo", "describe")

@@ -34,12 +34,20 @@ def config_class(arch: str) -> type[AwdaConfig] | type[TosviConfig]:
 
 
 def default_config(
-    arch: str, *, height_px: int = 240, width_px: int = 320, backbone_weights: str = "imagenet", **trunk: Any
+    arch: str,
+    *,
+    height_px: int = 240,
+    width_px: int = 320,
+    backbone_weights: str = "imagenet",
+    **trunk: Any,
 ) -> ModelConfig:
     """The paper's configuration of ``arch`` at the given image size (extra ``TrunkConfig`` fields
     may be overridden by keyword)."""
     trunk_cfg = TrunkConfig(
-        image_height_px=height_px, image_width_px=width_px, backbone_weights=backbone_weights, **trunk
+        image_height_px=height_px,
+        image_width_px=width_px,
+        backbone_weights=backbone_weights,
+        **trunk,
     )
     if arch == "awda":
         return AwdaConfig(trunk=trunk_cfg)

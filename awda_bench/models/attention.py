@@ -14,7 +14,9 @@ import torch.nn.functional as F
 from torch import nn
 
 
-def sinusoidal_encoding(length: int, channels: int, device: torch.device, dtype: torch.dtype) -> torch.Tensor:
+def sinusoidal_encoding(
+    length: int, channels: int, device: torch.device, dtype: torch.dtype
+) -> torch.Tensor:
     r"""Transformer sine/cosine table ``(channels, length)``.
 
     :math:`PE_{2i, p} = \sin(p / 10000^{2i/C})`, :math:`PE_{2i+1, p} = \cos(p / 10000^{2i/C})`.
@@ -30,7 +32,7 @@ def sinusoidal_encoding(length: int, channels: int, device: torch.device, dtype:
 
 
 class SpaceTimePositionalEncoding(nn.Module):
-    """Adds :func:`sinusoidal_encoding` over the flattened (time, space) axis of ``(B, C, T, h, w)``."""
+    """Adds :func:`sinusoidal_encoding` over the flattened (time, space) axis of (B, C, T, h, w)."""
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         b, c, t, h, w = x.shape
@@ -65,7 +67,11 @@ class SelfAttention3d(nn.Module):
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         b, _, t, h, w = x.shape
-        q, k, v = self._tokens(self.query(x)), self._tokens(self.key(x)), self._tokens(self.value(x))
+        q, k, v = (
+            self._tokens(self.query(x)),
+            self._tokens(self.key(x)),
+            self._tokens(self.value(x)),
+        )
         attended = F.scaled_dot_product_attention(q, k, v)  # (B, heads, L, d)
         attended = attended.transpose(2, 3).reshape(b, self.heads * self.head_dim, t, h, w)
         return self.norm(x + self.dropout(self.output(attended)))
@@ -82,8 +88,16 @@ class SpatialSoftmax(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         b, c, t, h, w = x.shape
         weights = torch.softmax(x.reshape(b, c, t, h * w), dim=-1)
-        ys = torch.linspace(-1.0, 1.0, h, device=x.device, dtype=x.dtype) if h > 1 else x.new_zeros(1)
-        xs = torch.linspace(-1.0, 1.0, w, device=x.device, dtype=x.dtype) if w > 1 else x.new_zeros(1)
+        ys = (
+            torch.linspace(-1.0, 1.0, h, device=x.device, dtype=x.dtype)
+            if h > 1
+            else x.new_zeros(1)
+        )
+        xs = (
+            torch.linspace(-1.0, 1.0, w, device=x.device, dtype=x.dtype)
+            if w > 1
+            else x.new_zeros(1)
+        )
         grid_y, grid_x = torch.meshgrid(ys, xs, indexing="ij")
         ex = (weights * grid_x.reshape(-1)).sum(-1)  # (B, C, T)
         ey = (weights * grid_y.reshape(-1)).sum(-1)

@@ -4,9 +4,9 @@ Batch format (what a dataset's samples stack into; images RGB float in [0, 1], c
 
     "demo":        (B, demo_frames, 3, H, W)   demonstration frames, first and last included
     "first_frame": (B, 3, H, W)                the agent's first frame o_1
-    "trajectory":  (B, T, 3 + k)               ground truth: TCP xyz [m] + k attribute flags in [0, 1];
-                                               trajectory[:, 0] is the TCP at o_1 (polylines start there)
-    "head":        (B,) int64                  0 = task-driven sample, 1 = synthesized (trajectory synthesis)
+    "trajectory":  (B, T, 3 + k)   ground truth: TCP xyz [m] + k attribute flags in [0, 1];
+                                   trajectory[:, 0] is the TCP at o_1 (polylines start there)
+    "head":        (B,) int64      0 = task-driven sample, 1 = synthesized (trajectory synthesis)
 
 Output coordinate convention: waypoints live in whatever frame the ``trajectory`` targets are given
 in; this project's datasets use the ManiSkill **world frame, metres**, TCP position
@@ -54,13 +54,15 @@ class AwdaNet(nn.Module):
             for _ in range(config.num_heads)
         )
 
-    def forward(self, demo: torch.Tensor, first_frame: torch.Tensor, head: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, demo: torch.Tensor, first_frame: torch.Tensor, head: torch.Tensor
+    ) -> torch.Tensor:
         """``demo (B, Td, 3, H, W)``, ``first_frame (B, 3, H, W)``, ``head (B,)`` ->
         raw waypoints ``(B, 15, 3 + k)`` (xyz [m], attribute logits), sets flat in order 1..5."""
         cfg = self.config
         if demo.dim() != 5 or first_frame.dim() != 4 or demo.shape[1] != cfg.trunk.demo_frames:
             raise UsageError(
-                f"expected demo (B, {cfg.trunk.demo_frames}, 3, H, W) and first_frame (B, 3, H, W); "
+                f"expected demo (B, {cfg.trunk.demo_frames}, 3, H, W), first_frame (B, 3, H, W); "
                 f"got {tuple(demo.shape)} and {tuple(first_frame.shape)}"
             )
         size = (cfg.trunk.image_height_px, cfg.trunk.image_width_px)
@@ -73,12 +75,16 @@ class AwdaNet(nn.Module):
         features = self.trunk(frames)[:, -1]  # o_1 is the last time step
         b = features.shape[0]
         if head.shape != (b,) or int(head.min()) < 0 or int(head.max()) >= cfg.num_heads:
-            raise UsageError(f"head indices must be shape ({b},) in [0, {cfg.num_heads}); got {head.tolist()}")
+            raise UsageError(
+                f"head indices must be shape ({b},) in [0, {cfg.num_heads}); got {head.tolist()}"
+            )
         all_heads = torch.stack([h(features) for h in self.heads], dim=1)  # (B, heads, out)
         chosen = all_heads[torch.arange(b, device=all_heads.device), head.long()]
         return chosen.view(b, cfg.total_waypoints, cfg.waypoint_dim)
 
-    def compute_loss(self, batch: Mapping[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
+    def compute_loss(
+        self, batch: Mapping[str, torch.Tensor]
+    ) -> tuple[torch.Tensor, dict[str, float]]:
         """The multi-waypoint Soft-DTW loss of a batch (format in the module docstring)."""
         cfg = self.config
         waypoints = self(batch["demo"], batch["first_frame"], batch["head"])
@@ -99,7 +105,10 @@ class AwdaNet(nn.Module):
         return split_waypoint_sets(waypoints, self.config.num_waypoint_sets)
 
     def predict_waypoints(
-        self, demo_frames: np.ndarray | torch.Tensor, first_frame: np.ndarray | torch.Tensor, head: str = "task"
+        self,
+        demo_frames: np.ndarray | torch.Tensor,
+        first_frame: np.ndarray | torch.Tensor,
+        head: str = "task",
     ) -> np.ndarray:
         """The largest waypoint set ``(5, 3 + k)``: xyz [m] + attribute probabilities.
 

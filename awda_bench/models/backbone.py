@@ -3,8 +3,8 @@
 Output stride 32: a ``(N, C_in, H, W)`` batch becomes ``(N, 512, ceil(H/32), ceil(W/32))``
 (240x320 -> 8x10, 224x224 -> 7x7). Weights come from one of three sources (``backbone_weights``):
 
-- ``imagenet``: torchvision's ``ResNet18_Weights.IMAGENET1K_V1``, fetched through the torch hub cache
-  (``$TORCH_HOME/hub/checkpoints``). Without network and without a cached file this raises
+- ``imagenet``: torchvision's ``ResNet18_Weights.IMAGENET1K_V1``, fetched through the torch hub
+  cache (``$TORCH_HOME/hub/checkpoints``). Without network and without a cached file this raises
   :class:`BackboneWeightsUnavailableError` naming the offline alternatives.
 - ``none``: torchvision's random initialization (seeded by the global torch RNG).
 - a path: a local ResNet-18 ``state_dict`` (torchvision key names; ``fc.*`` keys are ignored).
@@ -47,7 +47,8 @@ def _imagenet_state_dict() -> dict[str, torch.Tensor]:
     except (OSError, RuntimeError) as exc:  # URLError is an OSError; hash mismatch a RuntimeError
         reason = " ".join(str(exc).split())[:160]
         raise BackboneWeightsUnavailableError(
-            f"cannot fetch torchvision's ImageNet ResNet-18 weights ({type(exc).__name__}: {reason}); "
+            f"cannot fetch torchvision's ImageNet ResNet-18 weights "
+            f"({type(exc).__name__}: {reason}); "
             f"offline, use --backbone-weights none or a local .pth path "
             f"(or place resnet18-f37072fd.pth in {torch.hub.get_dir()}/checkpoints)"
         ) from exc
@@ -67,7 +68,9 @@ def _file_state_dict(path: Path) -> dict[str, torch.Tensor]:
             "re-export it with torch.save(model.state_dict(), path)"
         ) from exc
     if not isinstance(state, dict):
-        raise CorruptFileError(f"backbone weights file {path} holds a {type(state).__name__}, not a dict")
+        raise CorruptFileError(
+            f"backbone weights file {path} holds a {type(state).__name__}, not a dict"
+        )
     return state
 
 
@@ -100,7 +103,8 @@ def build_resnet18_features(
         if missing or unexpected:
             raise CorruptFileError(
                 f"backbone weights {weights!r} do not fit ResNet-18 "
-                f"(missing {missing[:3]}, unexpected {unexpected[:3]}); use a torchvision resnet18 state_dict"
+                f"(missing {missing[:3]}, unexpected {unexpected[:3]}); "
+                "use a torchvision resnet18 state_dict"
             )
     if in_channels != 3:
         conv = nn.Conv2d(in_channels, 64, kernel_size=7, stride=2, padding=3, bias=False)

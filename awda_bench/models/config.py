@@ -56,7 +56,9 @@ class TrunkConfig:
 
     def __post_init__(self) -> None:
         o = "TrunkConfig"
-        _check(self.image_height_px >= 64, o, "image_height_px", self.image_height_px, "an int >= 64")
+        _check(
+            self.image_height_px >= 64, o, "image_height_px", self.image_height_px, "an int >= 64"
+        )
         _check(self.image_width_px >= 64, o, "image_width_px", self.image_width_px, "an int >= 64")
         _check(self.demo_frames >= 1, o, "demo_frames", self.demo_frames, "an int >= 1")
         _check(
@@ -66,10 +68,16 @@ class TrunkConfig:
             self.backbone_weights,
             f"one of {', '.join(BACKBONE_WEIGHT_CHOICES)} or a path to a .pth file",
         )
-        _check(self.attention_layers >= 0, o, "attention_layers", self.attention_layers, "an int >= 0")
+        _check(
+            self.attention_layers >= 0, o, "attention_layers", self.attention_layers, "an int >= 0"
+        )
         _check(self.attention_heads >= 1, o, "attention_heads", self.attention_heads, "an int >= 1")
         _check(
-            self.attention_head_dim >= 1, o, "attention_head_dim", self.attention_head_dim, "an int >= 1"
+            self.attention_head_dim >= 1,
+            o,
+            "attention_head_dim",
+            self.attention_head_dim,
+            "an int >= 1",
         )
         _check(0.0 <= self.dropout < 1.0, o, "dropout", self.dropout, "a float in [0, 1)")
         _check(self.hidden_dim >= 1, o, "hidden_dim", self.hidden_dim, "an int >= 1")
@@ -87,7 +95,7 @@ class AwdaConfig:
     num_waypoint_sets: int = 5
     """Predicted sets have 1, 2, ..., this many waypoints (paper: 5 sets, 15 waypoints)."""
     num_heads: int = 2
-    """Waypoint heads, chosen per sample: 0 = task-driven data, 1 = synthesized (1 = single head)."""
+    """Waypoint heads, chosen per sample: 0 task-driven data, 1 synthesized (1 = single head)."""
     head_hidden_dim: int = 256
     """Hidden width of each head's 2-layer MLP."""
     points_per_segment: int = 12
@@ -101,15 +109,25 @@ class AwdaConfig:
         o = "AwdaConfig"
         _check(self.num_attributes >= 1, o, "num_attributes", self.num_attributes, "an int >= 1")
         _check(
-            self.num_waypoint_sets >= 1, o, "num_waypoint_sets", self.num_waypoint_sets, "an int >= 1"
+            self.num_waypoint_sets >= 1,
+            o,
+            "num_waypoint_sets",
+            self.num_waypoint_sets,
+            "an int >= 1",
         )
         _check(self.num_heads >= 1, o, "num_heads", self.num_heads, "an int >= 1")
         _check(self.head_hidden_dim >= 1, o, "head_hidden_dim", self.head_hidden_dim, "an int >= 1")
         _check(
-            self.points_per_segment >= 1, o, "points_per_segment", self.points_per_segment, "an int >= 1"
+            self.points_per_segment >= 1,
+            o,
+            "points_per_segment",
+            self.points_per_segment,
+            "an int >= 1",
         )
         _check(self.gamma > 0.0, o, "gamma", self.gamma, "a float > 0")
-        _check(self.attribute_scale >= 0.0, o, "attribute_scale", self.attribute_scale, "a float >= 0")
+        _check(
+            self.attribute_scale >= 0.0, o, "attribute_scale", self.attribute_scale, "a float >= 0"
+        )
 
     @property
     def waypoint_dim(self) -> int:
@@ -156,7 +174,11 @@ class TosviConfig:
         _check(self.frame_stack >= 2, o, "frame_stack", self.frame_stack, "an int >= 2")
         _check(self.action_dim >= 1, o, "action_dim", self.action_dim, "an int >= 1")
         _check(
-            self.mixture_components >= 1, o, "mixture_components", self.mixture_components, "an int >= 1"
+            self.mixture_components >= 1,
+            o,
+            "mixture_components",
+            self.mixture_components,
+            "an int >= 1",
         )
         _check(self.action_bins >= 2, o, "action_bins", self.action_bins, "an int >= 2")
         _check(self.initial_scale > 0.0, o, "initial_scale", self.initial_scale, "a float > 0")
@@ -168,7 +190,9 @@ class TosviConfig:
             self.inverse_loss_weight,
             "a float >= 0",
         )
-        _check(self.depth_height_px >= 32, o, "depth_height_px", self.depth_height_px, "an int >= 32")
+        _check(
+            self.depth_height_px >= 32, o, "depth_height_px", self.depth_height_px, "an int >= 32"
+        )
         _check(self.depth_width_px >= 32, o, "depth_width_px", self.depth_width_px, "an int >= 32")
         _check(self.max_depth_m > 0.0, o, "max_depth_m", self.max_depth_m, "a float > 0")
 

@@ -10,8 +10,8 @@ bin width :math:`h = (high - low) / (2 (bins - 1))`. A mixture of M logistics wi
                             - \sigma\!\left(\tfrac{x - h - \mu_m}{s_m}\right)\right],
 
 with the lowest bin taking all mass below it and the highest all mass above. Log-probabilities are
-computed in log space (``logsigmoid``/``softplus``), and where a bin's mass underflows the density at
-the bin centre times the bin width stands in, so the NLL is finite for any parameters.
+computed in log space (``logsigmoid``/``softplus``), and where a bin's mass underflows the density
+at the bin centre times the bin width stands in, so the NLL is finite for any parameters.
 """
 
 from __future__ import annotations
@@ -28,7 +28,9 @@ MIN_LOG_SCALE = -7.0
 class DiscretizedLogisticMixture:
     """Per-dimension mixture from raw parameters ``(..., D, 3 M)``: logits | means | log-scales."""
 
-    def __init__(self, params: torch.Tensor, bins: int, low: float = -1.0, high: float = 1.0) -> None:
+    def __init__(
+        self, params: torch.Tensor, bins: int, low: float = -1.0, high: float = 1.0
+    ) -> None:
         logits, means, log_scales = params.chunk(3, dim=-1)
         self.log_weights = torch.log_softmax(logits, dim=-1)  # (..., D, M)
         self.means = means
@@ -67,7 +69,7 @@ class DiscretizedLogisticMixture:
         return (self.log_weights.exp() * self.means).sum(-1).clamp(self.low, self.high)
 
     def mode(self) -> torch.Tensor:
-        """Mean of the most probable component ``(..., D)`` (the peak of a well-separated mixture)."""
+        """Mean of the most probable component ``(..., D)`` (peak of a well-separated mixture)."""
         best = self.log_weights.argmax(dim=-1, keepdim=True)
         return self.means.gather(-1, best).squeeze(-1).clamp(self.low, self.high)
 

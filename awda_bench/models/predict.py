@@ -22,7 +22,9 @@ if TYPE_CHECKING:
     from awda_bench.models.awda_net import AwdaNet
 
 
-def frames_to_tensor(frames: np.ndarray | torch.Tensor, height_px: int, width_px: int) -> torch.Tensor:
+def frames_to_tensor(
+    frames: np.ndarray | torch.Tensor, height_px: int, width_px: int
+) -> torch.Tensor:
     """Images ``(..., H, W, 3)`` uint8 (camera layout) or ``(..., 3, H, W)`` float in [0, 1] ->
     float ``(..., 3, H, W)`` in [0, 1]. The size must already be ``height_px x width_px``."""
     tensor = torch.as_tensor(frames)
@@ -31,7 +33,9 @@ def frames_to_tensor(frames: np.ndarray | torch.Tensor, height_px: int, width_px
             raise UsageError(f"uint8 frames must be (..., H, W, 3); got {tuple(tensor.shape)}")
         tensor = tensor.movedim(-1, -3).float() / 255.0
     elif tensor.shape[-3] != 3:
-        raise UsageError(f"float frames must be (..., 3, H, W) in [0, 1]; got {tuple(tensor.shape)}")
+        raise UsageError(
+            f"float frames must be (..., 3, H, W) in [0, 1]; got {tuple(tensor.shape)}"
+        )
     if tuple(tensor.shape[-2:]) != (height_px, width_px):
         raise UsageError(
             f"frames are {tensor.shape[-2]}x{tensor.shape[-1]} but the model expects "

@@ -50,7 +50,15 @@ FORMAT_VERSION = 1
 SNAPSHOT_PATTERN = re.compile(r"^snapshot-(\d+)\.pt$")
 """File names :func:`list_snapshots` recognizes; the number is the training step."""
 
-_REQUIRED_KEYS = ("format_version", "arch", "config", "model_state", "optimizer_state", "step", "rng_state")
+_REQUIRED_KEYS = (
+    "format_version",
+    "arch",
+    "config",
+    "model_state",
+    "optimizer_state",
+    "step",
+    "rng_state",
+)
 
 
 def snapshot_path(directory: Path, step: int) -> Path:
@@ -77,7 +85,8 @@ def list_snapshots(directory: Path | str) -> list[Path]:
 
 def capture_rng_state() -> dict[str, Any]:
     """The torch (CPU and CUDA), numpy and python generator states, in weights_only-safe types."""
-    kind, keys, pos, has_gauss, cached = np.random.get_state()
+    # The legacy global numpy generator is what third-party code draws from, so it is what we save.
+    kind, keys, pos, has_gauss, cached = np.random.get_state()  # noqa: NPY002
     version, internal, gauss_next = random.getstate()
     return {
         "torch": torch.get_rng_state(),
@@ -99,8 +108,14 @@ def restore_rng_state(state: dict[str, Any]) -> None:
     if state["cuda"] and torch.cuda.is_available():
         torch.cuda.set_rng_state_all(state["cuda"])
     n = state["numpy"]
-    np.random.set_state(
-        (n["kind"], n["keys"].numpy().astype(np.uint32), n["pos"], n["has_gauss"], n["cached_gaussian"])
+    np.random.set_state(  # noqa: NPY002
+        (
+            n["kind"],
+            n["keys"].numpy().astype(np.uint32),
+            n["pos"],
+            n["has_gauss"],
+            n["cached_gaussian"],
+        )
     )
     version, internal, gauss_next = state["python"]
     random.setstate((version, tuple(internal), gauss_next))
@@ -147,7 +162,7 @@ def save_snapshot(
     optimizer: torch.optim.Optimizer | None = None,
     train_config: object | None = None,
 ) -> Path:
-    """Write ``model`` (+ optimizer, step, RNG states) to ``path`` atomically (temp file + rename)."""
+    """Write ``model`` (+ optimizer, step, RNG states) to ``path`` atomically (temp + rename)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = {
@@ -170,7 +185,9 @@ def load_snapshot(path: Path | str) -> Snapshot:
     """Read and check a snapshot file; anything unreadable raises :class:`CorruptFileError`."""
     path = Path(path)
     if not path.is_file():
-        raise UsageError(f"snapshot {path} does not exist; list a run's snapshots with list_snapshots(dir)")
+        raise UsageError(
+            f"snapshot {path} does not exist; list a run's snapshots with list_snapshots(dir)"
+        )
     data = path.read_bytes()
     digest = hashlib.sha256(data).hexdigest()
     try:
@@ -178,17 +195,21 @@ def load_snapshot(path: Path | str) -> Snapshot:
     except (RuntimeError, pickle.UnpicklingError, EOFError, ValueError, zipfile.BadZipFile) as exc:
         reason = " ".join(str(exc).split())[:120]
         raise CorruptFileError(
-            f"{path} is not a readable snapshot ({type(exc).__name__}: {reason}); re-copy or delete it"
+            f"{path} is not a readable snapshot ({type(exc).__name__}: {reason}); "
+            "re-copy or delete it"
         ) from exc
     if not isinstance(raw, dict) or any(key not in raw for key in _REQUIRED_KEYS):
         missing = [k for k in _REQUIRED_KEYS if not isinstance(raw, dict) or k not in raw]
         raise CorruptFileError(f"{path} is not an awda_bench snapshot (missing {missing})")
     if raw["format_version"] != FORMAT_VERSION:
         raise CorruptFileError(
-            f"{path} has snapshot format {raw['format_version']!r}; this version reads {FORMAT_VERSION}"
+            f"{path} has snapshot format {raw['format_version']!r}; "
+            f"this version reads {FORMAT_VERSION}"
         )
     if raw["arch"] not in ARCHITECTURES:
-        raise CorruptFileError(f"{path} holds unknown architecture {raw['arch']!r}; known: {ARCHITECTURES}")
+        raise CorruptFileError(
+            f"{path} holds unknown architecture {raw['arch']!r}; known: {ARCHITECTURES}"
+        )
     try:
         config = config_for_arch(raw["arch"], raw["config"])
     except (UsageError, TypeError) as exc:
@@ -221,7 +242,8 @@ def restore(
     arch = arch_of(model)
     if snapshot.arch != arch:
         raise CorruptFileError(
-            f"{snapshot.path} holds a {snapshot.arch!r} model, not {arch!r}; load it with --model {snapshot.arch}"
+            f"{snapshot.path} holds a {snapshot.arch!r} model, not {arch!r}; "
+            f"load it with --model {snapshot.arch}"
         )
     ours = config_to_dict(model.config)
     theirs = config_to_dict(snapshot.config)
@@ -235,10 +257,14 @@ def restore(
     try:
         model.load_state_dict(snapshot.model_state, strict=True)
     except RuntimeError as exc:
-        raise CorruptFileError(f"{snapshot.path}: model weights do not fit the {arch} model") from exc
+        raise CorruptFileError(
+            f"{snapshot.path}: model weights do not fit the {arch} model"
+        ) from exc
     if optimizer is not None:
         if snapshot.optimizer_state is None:
-            raise CorruptFileError(f"{snapshot.path} has no optimizer state; it cannot resume training")
+            raise CorruptFileError(
+                f"{snapshot.path} has no optimizer state; it cannot resume training"
+            )
         optimizer.load_state_dict(snapshot.optimizer_state)
     if rng:
         restore_rng_state(snapshot.rng_state)

@@ -15,8 +15,8 @@ time (all cells with :math:`i + j = d` are independent), vectorized over the bat
 The soft-min is a ``logsumexp`` (max-shifted), so :math:`\gamma = 10^{-3}` neither overflows nor
 underflows.
 
-The gradient :math:`E = \partial R_{N,M} / \partial \Delta` is the expected alignment matrix, computed
-by the backward recursion of Cuturi & Blondel (Algorithm 2), again per anti-diagonal:
+The gradient :math:`E = \partial R_{N,M} / \partial \Delta` is the expected alignment matrix,
+computed by the backward recursion of Cuturi & Blondel (Algorithm 2), again per anti-diagonal:
 
 .. math::
 
@@ -25,8 +25,8 @@ by the backward recursion of Cuturi & Blondel (Algorithm 2), again per anti-diag
             + E_{i+1,j+1}\, e^{(R_{i+1,j+1} - R_{i,j} - \Delta_{i+1,j+1})/\gamma}.
 
 Every exponent is :math:`\le 0` (a soft-min never exceeds its arguments), so the backward pass is
-stable too. Gradients with respect to the sequences flow through the cost matrix by ordinary autograd
-(:func:`soft_dtw` builds :math:`\Delta` from the two sequences with differentiable torch ops).
+stable too. Gradients with respect to the sequences flow through the cost matrix by ordinary
+autograd (:func:`soft_dtw` builds :math:`\Delta` from the sequences with differentiable torch ops).
 """
 
 from __future__ import annotations
@@ -52,14 +52,16 @@ def squared_euclidean_cost(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
     return (x.unsqueeze(2) - y.unsqueeze(1)).pow(2).sum(dim=-1)
 
 
-def _diagonal_indices(n: int, m: int, d: int, device: torch.device) -> tuple[torch.Tensor, torch.Tensor]:
+def _diagonal_indices(
+    n: int, m: int, d: int, device: torch.device
+) -> tuple[torch.Tensor, torch.Tensor]:
     """1-based (i, j) of the cells with ``i + j == d``, ``1 <= i <= n``, ``1 <= j <= m``."""
     i = torch.arange(max(1, d - m), min(n, d - 1) + 1, device=device)
     return i, d - i
 
 
 def soft_dtw_forward_table(cost: torch.Tensor, gamma: float) -> torch.Tensor:
-    """The full table ``R`` of shape ``(B, N + 2, M + 2)`` (row/column 0 and N+1/M+1 are borders)."""
+    """The full table ``R``, ``(B, N + 2, M + 2)`` (rows/columns 0 and N+1/M+1 are borders)."""
     b, n, m = cost.shape
     r = torch.full((b, n + 2, m + 2), float("inf"), dtype=cost.dtype, device=cost.device)
     r[:, 0, 0] = 0.0
@@ -97,7 +99,7 @@ def soft_dtw_backward_table(cost: torch.Tensor, r: torch.Tensor, gamma: float) -
 
 
 class _SoftDtwFunction(torch.autograd.Function):
-    """Soft-DTW value of a batch of cost matrices, with the analytic (expected-alignment) gradient."""
+    """Soft-DTW of a batch of cost matrices, with the analytic (expected-alignment) gradient."""
 
     @staticmethod
     def forward(ctx: Any, cost: torch.Tensor, gamma: float) -> torch.Tensor:

@@ -23,7 +23,7 @@ WORKSPACE_HIGH_M = (0.25, 0.25, 0.35)
 
 
 class SyntheticWaypointDataset:
-    """AWDA samples: ``demo``, ``first_frame``, ``trajectory``, ``head`` (+ ``waypoints``, the truth)."""
+    """AWDA samples: demo, first_frame, trajectory, head (+ ``waypoints``, the truth)."""
 
     def __init__(
         self,
@@ -67,7 +67,7 @@ class SyntheticWaypointDataset:
 
 
 class SyntheticActionDataset:
-    """T-OSVI samples: ``demo``, ``frames``, ``actions`` (+ ``depth`` [m] when ``depth_size`` given)."""
+    """T-OSVI samples: demo, frames, actions (+ ``depth`` [m] when ``depth_size`` is given)."""
 
     def __init__(
         self,

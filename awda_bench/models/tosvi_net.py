@@ -1,4 +1,4 @@
-"""The T-OSVI baseline (Dasari & Gupta, 2020) on the shared trunk, with an optional ``+depth`` variant.
+"""The T-OSVI baseline (Dasari & Gupta, 2020) on the shared trunk, with an optional +depth variant.
 
 Frames enter the trunk as ``[demo_1 .. demo_10, o_{t-5} .. o_t]`` (T-OSVI order). Two heads read the
 per-frame vectors ``f``:
@@ -77,21 +77,45 @@ class TosviNet(nn.Module):
         """Architecture name recorded in snapshots: ``tosvi`` or ``tosvi-depth``."""
         return "tosvi-depth" if self.config.use_depth else "tosvi"
 
-    def _check_inputs(self, demo: torch.Tensor, frames: torch.Tensor, depth: torch.Tensor | None) -> None:
+    def _check_inputs(
+        self, demo: torch.Tensor, frames: torch.Tensor, depth: torch.Tensor | None
+    ) -> None:
         cfg = self.config
         size = (cfg.trunk.image_height_px, cfg.trunk.image_width_px)
-        if demo.dim() != 5 or demo.shape[1] != cfg.trunk.demo_frames or tuple(demo.shape[-2:]) != size:
-            raise UsageError(f"demo must be (B, {cfg.trunk.demo_frames}, 3, {size[0]}, {size[1]}); got {tuple(demo.shape)}")
-        if frames.dim() != 5 or frames.shape[1] != cfg.frame_stack or tuple(frames.shape[-2:]) != size:
-            raise UsageError(f"frames must be (B, {cfg.frame_stack}, 3, {size[0]}, {size[1]}); got {tuple(frames.shape)}")
+        if (
+            demo.dim() != 5
+            or demo.shape[1] != cfg.trunk.demo_frames
+            or tuple(demo.shape[-2:]) != size
+        ):
+            raise UsageError(
+                f"demo must be (B, {cfg.trunk.demo_frames}, 3, {size[0]}, {size[1]}); "
+                f"got {tuple(demo.shape)}"
+            )
+        if (
+            frames.dim() != 5
+            or frames.shape[1] != cfg.frame_stack
+            or tuple(frames.shape[-2:]) != size
+        ):
+            raise UsageError(
+                f"frames must be (B, {cfg.frame_stack}, 3, {size[0]}, {size[1]}); "
+                f"got {tuple(frames.shape)}"
+            )
         if cfg.use_depth:
             dsize = (cfg.depth_height_px, cfg.depth_width_px)
-            if depth is None or depth.dim() != 5 or depth.shape[1:3] != (cfg.frame_stack, 1) or tuple(depth.shape[-2:]) != dsize:
+            if (
+                depth is None
+                or depth.dim() != 5
+                or depth.shape[1:3] != (cfg.frame_stack, 1)
+                or tuple(depth.shape[-2:]) != dsize
+            ):
                 got = None if depth is None else tuple(depth.shape)
-                raise UsageError(f"depth must be (B, {cfg.frame_stack}, 1, {dsize[0]}, {dsize[1]}) metres; got {got}")
+                raise UsageError(
+                    f"depth must be (B, {cfg.frame_stack}, 1, {dsize[0]}, {dsize[1]}) metres; "
+                    f"got {got}"
+                )
 
     def _fuse_depth(self, features: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
-        """RGB features ``(B, T, 512, h, w)`` + agent depth ``(B, S, 1, Hd, Wd)`` -> fused features."""
+        """RGB features ``(B, T, 512, h, w)`` + agent depth ``(B, S, 1, Hd, Wd)`` -> fused."""
         assert self.depth_backbone is not None and self.depth_fusion is not None
         cfg = self.config
         b, t, c, h, w = features.shape
@@ -126,7 +150,9 @@ class TosviNet(nn.Module):
     def distribution(self, params: torch.Tensor) -> DiscretizedLogisticMixture:
         return DiscretizedLogisticMixture(params, bins=self.config.action_bins)
 
-    def compute_loss(self, batch: Mapping[str, torch.Tensor]) -> tuple[torch.Tensor, dict[str, float]]:
+    def compute_loss(
+        self, batch: Mapping[str, torch.Tensor]
+    ) -> tuple[torch.Tensor, dict[str, float]]:
         """Policy NLL of a_t + ``inverse_loss_weight`` x inverse-model NLL of a_{t-5..t-1}.
 
         NLLs are summed over action dimensions and averaged over samples (and pairs) [nats].

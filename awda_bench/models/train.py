@@ -1,7 +1,7 @@
 """The training loop: Adam on ``model.compute_loss(batch)``, snapshots every N steps, resumable.
 
-Works on any map-style dataset (``len(ds)``, ``ds[i] -> dict[str, Tensor]``) whose samples stack into
-the model's batch format (:mod:`awda_bench.models.awda_net`, :mod:`awda_bench.models.tosvi_net`).
+Works on any map-style dataset (``len(ds)``, ``ds[i] -> dict[str, Tensor]``) whose samples stack
+into the model's batch format (:mod:`awda_bench.models.awda_net`, :mod:`~.tosvi_net`).
 
 Batch order is a function of ``(seed, step)`` only: the sample at global position
 ``p = step * batch_size + i`` is ``perm(seed, p // len(ds))[p % len(ds)]`` (a fresh permutation per
@@ -28,7 +28,13 @@ from torch.utils.data import default_collate
 from awda_bench.errors import UsageError
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import TrainConfig
-from awda_bench.models.snapshot import list_snapshots, load_snapshot, restore, save_snapshot, snapshot_path
+from awda_bench.models.snapshot import (
+    list_snapshots,
+    load_snapshot,
+    restore,
+    save_snapshot,
+    snapshot_path,
+)
 from awda_bench.models.tosvi_net import TosviNet
 
 
@@ -61,7 +67,9 @@ def resolve_device(name: str) -> torch.device:
     if name == "auto":
         return torch.device("cuda" if torch.cuda.is_available() else "cpu")
     if name == "cuda" and not torch.cuda.is_available():
-        raise UsageError("device 'cuda' requested but torch sees no CUDA device; use --device auto or cpu")
+        raise UsageError(
+            "device 'cuda' requested but torch sees no CUDA device; use --device auto or cpu"
+        )
     return torch.device(name)
 
 
@@ -80,7 +88,7 @@ def batch_indices(step: int, batch_size: int, dataset_size: int, seed: int) -> l
 
 def _seed_everything(seed: int) -> None:
     torch.manual_seed(seed)
-    np.random.seed(seed % 2**32)
+    np.random.seed(seed % 2**32)  # noqa: NPY002 (the legacy global generator)
     random.seed(seed)
 
 
@@ -94,8 +102,8 @@ def train(
 ) -> TrainResult:
     """Train ``model`` in place up to ``config.max_steps``, writing snapshots to ``snapshot_dir``.
 
-    With ``config.resume`` and a snapshot in ``snapshot_dir``, the latest one is loaded first (model,
-    optimizer, step, RNG states); a snapshot of another architecture or config is refused.
+    With ``config.resume`` and a snapshot in ``snapshot_dir``, the latest one is loaded first
+    (model, optimizer, step, RNG states); a snapshot of another architecture or config is refused.
     ``on_step(step, loss_dict)`` is called after every step (progress display, logging).
     """
     if len(dataset) == 0:
@@ -129,7 +137,11 @@ def train(
             on_step(step, info)
         if step % config.snapshot_every_steps == 0 or step == config.max_steps:
             path = save_snapshot(
-                snapshot_path(snapshot_dir, step), model, step=step, optimizer=optimizer, train_config=config
+                snapshot_path(snapshot_dir, step),
+                model,
+                step=step,
+                optimizer=optimizer,
+                train_config=config,
             )
             result.snapshots.append(path)
     result.end_step = step

@@ -38,7 +38,10 @@ class VisualTrunk(nn.Module):
         self.attention = nn.Sequential(
             *(
                 SelfAttention3d(
-                    FEATURE_CHANNELS, config.attention_heads, config.attention_head_dim, config.dropout
+                    FEATURE_CHANNELS,
+                    config.attention_heads,
+                    config.attention_head_dim,
+                    config.dropout,
                 )
                 for _ in range(config.attention_layers)
             )

@@ -15,7 +15,8 @@ and linearly interpolated, ``P`` points per segment, into a dense polyline of ``
 Attributes enter the cost as ``attribute_scale * probability`` (prediction: sigmoid of the logit;
 ground truth: the 0/1 flag), so the reference weighting "TCP xyz + 0.2 x grasp flag" is
 ``attribute_scale = 0.2``. The loss is the Soft-DTW (squared Euclidean cost, temperature gamma)
-between each polyline and the ground-truth trajectory points, averaged over the batch and the S sets.
+between each polyline and the ground-truth trajectory points, averaged over the batch and the S
+sets.
 """
 
 from __future__ import annotations
@@ -41,11 +42,16 @@ def split_waypoint_sets(waypoints: torch.Tensor, num_sets: int) -> list[torch.Te
     return list(torch.split(waypoints, set_sizes(num_sets), dim=-2))
 
 
-def interpolate_polyline(start: torch.Tensor, waypoints: torch.Tensor, points_per_segment: int) -> torch.Tensor:
+def interpolate_polyline(
+    start: torch.Tensor, waypoints: torch.Tensor, points_per_segment: int
+) -> torch.Tensor:
     """Dense polyline from ``start (B, D)`` through ``waypoints (B, j, D)``: ``(B, j P + 1, D)``."""
     nodes = torch.cat((start.unsqueeze(1), waypoints), dim=1)  # (B, j+1, D)
     seg_start, seg_end = nodes[:, :-1], nodes[:, 1:]
-    t = torch.arange(points_per_segment, device=nodes.device, dtype=nodes.dtype) / points_per_segment
+    t = (
+        torch.arange(points_per_segment, device=nodes.device, dtype=nodes.dtype)
+        / points_per_segment
+    )
     points = seg_start.unsqueeze(2) + t.view(1, 1, -1, 1) * (seg_end - seg_start).unsqueeze(2)
     b, j, p, d = points.shape
     return torch.cat((points.reshape(b, j * p, d), nodes[:, -1:]), dim=1)
