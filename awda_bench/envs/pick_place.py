@@ -6,25 +6,19 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import sapien
 import torch
-from mani_skill.envs.sapien_env import BaseEnv
-from mani_skill.sensors.camera import CameraConfig
-from mani_skill.utils import sapien_utils
 from mani_skill.utils.registration import register_env
-from mani_skill.utils.scene_builder.table import TableSceneBuilder
 from mani_skill.utils.structs.pose import Pose
-from mani_skill.utils.structs.types import SimConfig
 
 from awda_bench.envs.bins import BinSpec, build_bin
-from awda_bench.envs.embodiments import AGENT_UID, EMBODIMENTS, embodiment
+from awda_bench.envs.embodiments import AGENT_UID
 from awda_bench.envs.objects import (
     PICK_PLACE_OBJECTS,
     ObjectSpec,
     build_object,
     distance_to_objects,
 )
-from awda_bench.errors import UsageError
+from awda_bench.envs.task_base import AWDATaskEnv
 
 NUM_TASKS = 16
 """``task = 4 * object + compartment``."""
@@ -56,24 +50,10 @@ class PickPlaceLayout:
     """Whole layouts drawn per env at reset; the first one meeting ``min_separation_m`` is kept."""
     success_max_height_m: float = 0.10
     """Success: the target's centre at most this far above the compartment floor [m]."""
-    reach_threshold_m: float = 0.04
-    """Reached: TCP within this distance of the target's surface before any grasp attempt [m]."""
-    lift_threshold_m: float = 0.05
-    """Grasped: after reaching, the target raised at least this much above its start height [m]."""
-    third_person_eye_m: tuple[float, float, float] = (0.32, 0.0, 0.68)
-    """Third-person camera position [m]."""
-    third_person_target_m: tuple[float, float, float] = (-0.12, 0.0, 0.0)
-    """Point the third-person camera looks at [m]."""
-    third_person_fov_rad: float = 1.0
-    """Third-person camera vertical field of view [rad]."""
-    camera_height_px: int = 240
-    """Third-person image height [px]."""
-    camera_width_px: int = 320
-    """Third-person image width [px]."""
 
 
 @register_env("AWDA-PickPlace-v1", max_episode_steps=300)
-class PickPlaceEnv(BaseEnv):
+class PickPlaceEnv(AWDATaskEnv):
     """
     **Task Description:**
     Pick the target object out of the source bin and put it into one of the 4 compartments of the
@@ -96,8 +76,9 @@ class PickPlaceEnv(BaseEnv):
       reached, then the target raised at least ``lift_threshold_m`` above its start height
     """
 
-    SUPPORTED_ROBOTS = list(EMBODIMENTS)
-    SUPPORTED_REWARD_MODES = ("sparse", "none")
+    family = "pick_place"
+    num_variations = NUM_TASKS
+    has_grasp_target = True
     objects_spec: tuple[ObjectSpec, ...] = PICK_PLACE_OBJECTS
 
     def __init__(
@@ -108,44 +89,10 @@ class PickPlaceEnv(BaseEnv):
         **kwargs: Any,
     ) -> None:
         self.layout = layout or PickPlaceLayout()
-        self.embodiment = embodiment(robot_uids)
-        kwargs.setdefault("control_mode", self.embodiment.control_mode)
         super().__init__(*args, robot_uids=robot_uids, **kwargs)
 
-    # ------------------------------------------------------------------ configuration
-    @property
-    def _default_sim_config(self) -> SimConfig:
-        return SimConfig(sim_freq=100, control_freq=20)
-
-    def _third_person_config(self, uid: str) -> CameraConfig:
-        lay = self.layout
-        return CameraConfig(
-            uid=uid,
-            pose=sapien_utils.look_at(
-                eye=list(lay.third_person_eye_m), target=list(lay.third_person_target_m)
-            ),
-            width=lay.camera_width_px,
-            height=lay.camera_height_px,
-            fov=lay.third_person_fov_rad,
-            near=0.01,
-            far=10.0,
-        )
-
-    @property
-    def _default_sensor_configs(self) -> list[CameraConfig]:
-        return [self._third_person_config("third_person")]
-
-    @property
-    def _default_human_render_camera_configs(self) -> CameraConfig:
-        return self._third_person_config("render_camera")
-
     # ------------------------------------------------------------------ scene
-    def _load_agent(self, options: dict) -> None:
-        super()._load_agent(options, sapien.Pose(p=list(self.embodiment.base_xyz_m)))
-
-    def _load_scene(self, options: dict) -> None:
-        self.table_scene = TableSceneBuilder(self, robot_init_qpos_noise=0.0)
-        self.table_scene.build()
+    def _load_task_scene(self, options: dict) -> None:
         self.source_bin = build_bin(self.scene, self.layout.source_bin, name="source_bin")
         self.target_bin = build_bin(self.scene, self.layout.target_bin, name="target_bin")
         floor = self.layout.source_bin.floor_z_m
@@ -159,33 +106,6 @@ class PickPlaceEnv(BaseEnv):
         self._compartment_hi = torch.tensor(
             [[b[0][1], b[1][1]] for b in boxes], dtype=torch.float32, device=self.device
         )
-        self._half_heights = torch.tensor(
-            [s.half_height_m for s in self.objects_spec], dtype=torch.float32, device=self.device
-        )
-        n = self.num_envs
-        self.task = torch.zeros(n, dtype=torch.long, device=self.device)
-        """(n,) task index per env."""
-        self.grip_attempted = torch.zeros(n, dtype=torch.bool, device=self.device)
-        """(n,) latched: the gripper has been commanded closed this episode."""
-        self.reached = torch.zeros(n, dtype=torch.bool, device=self.device)
-        """(n,) latched grasp-analysis flag (see the class docstring)."""
-        self.grasped = torch.zeros(n, dtype=torch.bool, device=self.device)
-        """(n,) latched grasp-analysis flag (see the class docstring)."""
-        self.success_once = torch.zeros(n, dtype=torch.bool, device=self.device)
-        """(n,) latched: success was true at some step."""
-        self.target_start_z = torch.zeros(n, dtype=torch.float32, device=self.device)
-        """(n,) target object's centre height at reset [m]."""
-
-    def _parse_task(self, options: dict, b: int) -> torch.Tensor:
-        raw = options.get("task", 0)
-        task = torch.as_tensor(raw, dtype=torch.long, device=self.device).reshape(-1)
-        if task.numel() == 1:
-            task = task.expand(b)
-        if task.numel() != b:
-            raise UsageError(f"options['task'] must be an int or {b} ints, got {raw!r}")
-        if bool(((task < 0) | (task >= NUM_TASKS)).any()):
-            raise UsageError(f"options['task'] must be in 0..{NUM_TASKS - 1}, got {raw!r}")
-        return task
 
     def _sample_layouts(self, b: int) -> torch.Tensor:
         """(b, 4, 2) object centres, pairwise >= ``min_separation_m`` (whole-layout rejection)."""
@@ -205,36 +125,21 @@ class PickPlaceEnv(BaseEnv):
         first = ok.to(torch.int8).argmax(dim=1)
         return xy[torch.arange(b, device=self.device), first]
 
-    def _initialize_episode(self, env_idx: torch.Tensor, options: dict) -> None:
-        with torch.device(self.device):
-            b = len(env_idx)
-            self.table_scene.initialize(env_idx)
-            keyframe = self.agent.keyframes[self.embodiment.rest_keyframe]
-            qpos = torch.as_tensor(np.asarray(keyframe.qpos), dtype=torch.float32).expand(b, -1)
-            self.agent.reset(qpos)
-            self.agent.robot.set_pose(sapien.Pose(p=list(self.embodiment.base_xyz_m)))
-
-            task = self._parse_task(options, b)
-            xy = self._sample_layouts(b)
-            yaw = torch.rand((b, len(self.objects)), device=self.device) * 2 * np.pi
-            floor = self.layout.source_bin.floor_z_m
-            for j, (actor, spec) in enumerate(zip(self.objects, self.objects_spec, strict=True)):
-                p = torch.zeros((b, 3))
-                p[:, :2] = xy[:, j]
-                p[:, 2] = floor + spec.half_height_m
-                q = torch.zeros((b, 4))
-                q[:, 0] = torch.cos(yaw[:, j] / 2)
-                q[:, 3] = torch.sin(yaw[:, j] / 2)
-                actor.set_pose(Pose.create_from_pq(p, q))
-                actor.set_linear_velocity(torch.zeros((b, 3)))
-                actor.set_angular_velocity(torch.zeros((b, 3)))
-
-            self.task[env_idx] = task
-            self.grip_attempted[env_idx] = False
-            self.reached[env_idx] = False
-            self.grasped[env_idx] = False
-            self.success_once[env_idx] = False
-            self.target_start_z[env_idx] = floor + self._half_heights[task // 4]
+    def _initialize_task(self, env_idx: torch.Tensor, variation: torch.Tensor) -> None:
+        b = len(env_idx)
+        xy = self._sample_layouts(b)
+        yaw = torch.rand((b, len(self.objects)), device=self.device) * 2 * np.pi
+        floor = self.layout.source_bin.floor_z_m
+        for j, (actor, spec) in enumerate(zip(self.objects, self.objects_spec, strict=True)):
+            p = torch.zeros((b, 3))
+            p[:, :2] = xy[:, j]
+            p[:, 2] = floor + spec.half_height_m
+            q = torch.zeros((b, 4))
+            q[:, 0] = torch.cos(yaw[:, j] / 2)
+            q[:, 3] = torch.sin(yaw[:, j] / 2)
+            actor.set_pose(Pose.create_from_pq(p, q))
+            actor.set_linear_velocity(torch.zeros((b, 3)))
+            actor.set_angular_velocity(torch.zeros((b, 3)))
 
     # ------------------------------------------------------------------ task state
     @property
@@ -268,13 +173,6 @@ class PickPlaceEnv(BaseEnv):
         z = torch.full((self.num_envs, 1), self.layout.target_bin.floor_z_m, device=self.device)
         return torch.cat([xy, z], dim=1)
 
-    def gripper_opening_m(self) -> torch.Tensor:
-        """(n,) finger gap [m] of whichever robot is loaded."""
-        if hasattr(self.agent, "gripper_opening_m"):
-            return self.agent.gripper_opening_m
-        qpos = self.agent.robot.get_qpos()
-        return qpos[:, -2] + qpos[:, -1]
-
     def is_grasping_target(self) -> torch.Tensor:
         """(n,) simulator truth: both fingers press on the target (Panda's contact-force test)."""
         idx = self.target_object_index
@@ -283,23 +181,16 @@ class PickPlaceEnv(BaseEnv):
             out = torch.where(idx == j, self.agent.is_grasping(self.objects[j]), out)
         return out
 
-    def truth_signals(self) -> dict[str, torch.Tensor]:
-        """(n,) bool simulator truths the demo recorder logs per step (attribute mining)."""
-        return {"grasp": self.is_grasping_target()}
+    def target_position(self) -> torch.Tensor:
+        return self.target_pose()[0]
 
-    # ------------------------------------------------------------------ step hooks
-    def _step_action(self, action: Any) -> Any:
-        # latch the grasp attempt on the commanded action; "reached" is latched by evaluate() on
-        # every state (reset and after each step), with the attempts commanded up to that state
-        if action is not None and not isinstance(action, dict):
-            a = torch.as_tensor(
-                np.asarray(action) if not isinstance(action, torch.Tensor) else action
-            )
-            a = a.to(self.device).reshape(self.num_envs, -1)
-            self.grip_attempted |= self.embodiment.grip_closed(a.float())
-        return super()._step_action(action)
+    def target_distance(self) -> torch.Tensor:
+        """(n,) TCP distance to the target object's surface [m]."""
+        pos, quat = self.object_poses()
+        d = distance_to_objects(self.agent.tcp_pose.p, pos, quat, self.objects_spec)
+        return self._select_target(d)
 
-    def evaluate(self) -> dict:
+    def _evaluate_task(self) -> dict[str, torch.Tensor]:
         pos, quat = self.object_poses()
         target_pos = self._select_target(pos)
         c = self.target_compartment
@@ -309,20 +200,12 @@ class PickPlaceEnv(BaseEnv):
         success = inside_xy & (height >= 0) & (height <= self.layout.success_max_height_m)
         tcp_pos = self.agent.tcp_pose.p
         distance = self._select_target(distance_to_objects(tcp_pos, pos, quat, self.objects_spec))
-        self.reached |= (distance <= self.layout.reach_threshold_m) & ~self.grip_attempted
-        lifted = target_pos[:, 2] - self.target_start_z >= self.layout.lift_threshold_m
-        self.grasped |= self.reached & lifted
-        self.success_once |= success
         # the contact-force grasp test costs ~2 ms per step: call is_grasping_target() on demand;
         # tcp_pos and object_raw_poses (n, 4, 7: xyz + wxyz) are reused by _get_obs_extra
         return {
             "success": success,
-            "success_once": self.success_once.clone(),
-            "reached": self.reached.clone(),
-            "grasped": self.grasped.clone(),
-            "grip_attempted": self.grip_attempted.clone(),
             "target_distance_m": distance,
-            "task": self.task.clone(),
+            "target_pos": target_pos,
             "tcp_pos": tcp_pos,
             "object_raw_poses": torch.cat([pos, quat], dim=2),
         }
@@ -343,33 +226,3 @@ class PickPlaceEnv(BaseEnv):
                 goal_pos=self.compartment_center(),
             )
         return obs
-
-    def compute_sparse_reward(self, obs: Any, action: torch.Tensor, info: dict) -> torch.Tensor:
-        return info["success"].float()
-
-    # ------------------------------------------------------------------ state
-    _TASK_STATE = ("task", "grip_attempted", "reached", "grasped", "success_once", "target_start_z")
-    """Per-env task attributes saved beside the scene state."""
-
-    def get_state_dict(self) -> dict:
-        """Scene state plus the per-env task and latched flags under ``"task_state"`` ((n, 1)
-        floats,
-        so :meth:`get_state` can flatten them; :meth:`set_state` restores the scene only)."""
-        state = super().get_state_dict()
-        state["task_state"] = {
-            name: getattr(self, name).to(torch.float32)[:, None].clone()
-            for name in self._TASK_STATE
-        }
-        return state
-
-    def set_state_dict(self, state: dict, env_idx: torch.Tensor | None = None) -> None:
-        state = dict(state)
-        task_state = state.pop("task_state", None)
-        super().set_state_dict(state, env_idx)
-        if task_state is None:
-            return
-        idx = slice(None) if env_idx is None else env_idx
-        for name in self._TASK_STATE:
-            current = getattr(self, name)
-            value = torch.as_tensor(task_state[name], device=self.device).reshape(self.num_envs)
-            current[idx] = value[idx].to(current.dtype)

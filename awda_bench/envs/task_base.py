@@ -112,7 +112,9 @@ class AWDATaskEnv(BaseEnv):
     def _third_person_config(self, uid: str) -> CameraConfig:
         return CameraConfig(
             uid=uid,
-            pose=sapien_utils.look_at(eye=list(self.third_person_eye_m), target=list(self.third_person_target_m)),
+            pose=sapien_utils.look_at(
+                eye=list(self.third_person_eye_m), target=list(self.third_person_target_m)
+            ),
             width=self.camera_width_px,
             height=self.camera_height_px,
             fov=self.third_person_fov_rad,
@@ -158,7 +160,9 @@ class AWDATaskEnv(BaseEnv):
         if task.numel() != b:
             raise UsageError(f"options['task'] must be an int or {b} ints, got {raw!r}")
         if bool(((task < 0) | (task >= self.num_variations)).any()):
-            raise UsageError(f"options['task'] must be in 0..{self.num_variations - 1} for {self.family}, got {raw!r}")
+            raise UsageError(
+                f"options['task'] must be in 0..{self.num_variations - 1} for {self.family}, got {raw!r}"
+            )
         return task
 
     def _initialize_episode(self, env_idx: torch.Tensor, options: dict) -> None:
@@ -189,28 +193,32 @@ class AWDATaskEnv(BaseEnv):
 
     # ------------------------------------------------------------------ step hooks
     def _step_action(self, action: Any) -> Any:
-        # latch "reached" on the state *before* this action, and the grasp attempt on the action
+        # latch the grasp attempt on the commanded action; "reached" is latched by evaluate() on
+        # every state (reset and after each step), with the attempts commanded up to that state
         if action is not None and not isinstance(action, dict):
-            a = torch.as_tensor(np.asarray(action) if not isinstance(action, torch.Tensor) else action)
+            a = torch.as_tensor(
+                np.asarray(action) if not isinstance(action, torch.Tensor) else action
+            )
             if a.numel() == self.num_envs * 4:
                 a = a.to(self.device).reshape(self.num_envs, 4).float()
-                self._latch_reached()
                 self.grip_attempted |= self.embodiment.grip_closed(a)
         return super()._step_action(action)
 
-    def _latch_reached(self) -> None:
-        if self.has_grasp_target:
-            near = self.target_distance() <= self.reach_threshold_m
-            self.reached |= near & ~self.grip_attempted
-
     def evaluate(self) -> dict:
+        """``_evaluate_task()``'s dict plus the latched flags. A task may return
+        ``"target_distance_m"`` and ``"target_pos"`` to spare their recomputation."""
         result = self._evaluate_task()
-        success = result["success"]
-        self._latch_reached()
         if self.has_grasp_target:
-            lifted = self.target_position()[:, 2] - self.target_start_z >= self.lift_threshold_m
+            distance = result.get("target_distance_m")
+            if distance is None:
+                distance = self.target_distance()
+            target_pos = result.get("target_pos")
+            if target_pos is None:
+                target_pos = self.target_position()
+            self.reached |= (distance <= self.reach_threshold_m) & ~self.grip_attempted
+            lifted = target_pos[:, 2] - self.target_start_z >= self.lift_threshold_m
             self.grasped |= self.reached & lifted
-        self.success_once |= success
+        self.success_once |= result["success"]
         return {
             **result,
             "success_once": self.success_once.clone(),
@@ -235,7 +243,8 @@ class AWDATaskEnv(BaseEnv):
         """Scene state plus the per-env task flags under ``"task_state"`` ((n, 1) floats)."""
         state = super().get_state_dict()
         state["task_state"] = {
-            name: getattr(self, name).to(torch.float32)[:, None].clone() for name in self._TASK_STATE
+            name: getattr(self, name).to(torch.float32)[:, None].clone()
+            for name in self._TASK_STATE
         }
         return state
 
