@@ -80,8 +80,11 @@ class PressMiningConfig:
     """TCP displacement of a unit action component [m] (the controller's step)."""
     min_command_m: float = 0.004
     """Commands shorter than this [m] (20 % of a full step) are not "commanded to move"."""
-    progress_ratio: float = 0.2
-    """Pressing if the TCP advanced less than this fraction of the command along it."""
+    progress_ratio: float = 0.15
+    """Pressing if the TCP advanced less than this fraction of the command along it. Chosen from
+    ``panda_awda`` press-button expert rollouts (20 Hz): held against a button's stop the TCP
+    realizes < 0.02 of the command, the step onto the stop 0.04-0.2, free space >= 0.185 (the
+    first step from standstill; >= 0.22 otherwise); 0.2 flagged some of those standstill starts."""
     smooth_steps: int = 3
     """Taps of the box filter (odd); 1 disables smoothing."""
 

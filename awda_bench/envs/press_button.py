@@ -69,10 +69,10 @@ class PressButtonLayout:
     panels: tuple[ButtonPanelSpec, ...] = (
         ButtonPanelSpec(
             name="panel_row",
-            center_xy_m=(-0.10, -0.18),
-            plate_size_m=(0.10, 0.26, 0.04),
+            center_xy_m=(-0.07, -0.22),
+            plate_size_m=(0.26, 0.10, 0.04),
             plate_color=(0.18, 0.18, 0.20, 1.0),
-            button_xy_m=((0.0, -0.08), (0.0, 0.0), (0.0, 0.08)),
+            button_xy_m=((-0.08, 0.0), (0.0, 0.0), (0.08, 0.0)),
             button_colors=(
                 (0.90, 0.10, 0.10, 1.0),
                 (0.10, 0.75, 0.15, 1.0),
@@ -81,7 +81,7 @@ class PressButtonLayout:
         ),
         ButtonPanelSpec(
             name="panel_triangle",
-            center_xy_m=(-0.08, 0.18),
+            center_xy_m=(-0.07, 0.21),
             plate_size_m=(0.18, 0.18, 0.03),
             plate_color=(0.88, 0.82, 0.66, 1.0),
             button_xy_m=((0.045, -0.05), (0.045, 0.05), (-0.05, 0.0)),
@@ -92,8 +92,10 @@ class PressButtonLayout:
             ),
         ),
     )
-    """Panel 0: dark plate, a row of red/green/blue buttons; panel 1: cream plate, a triangle of
-    yellow/magenta/cyan buttons. Variation ``v`` = panel ``v // 3``, button ``v % 3``."""
+    """Panel 0: dark bar (long axis towards the camera), a row of red/green/blue buttons; panel 1:
+    cream square, a triangle of yellow/magenta/cyan buttons. Both stay clear of the table area the
+    robot's rest pose hides from the third-person camera (|y| < ~0.14 m). Variation ``v`` = panel
+    ``v // 3``, button ``v % 3``."""
     button_radius_m: float = 0.022
     """Cap radius [m] (the closed Panda fingertips are ~2 cm across)."""
     cap_length_m: float = 0.03
@@ -117,9 +119,9 @@ class PressButtonLayout:
     (9 N)."""
     joint_friction: float = 0.0
     """Joint friction coefficient."""
-    spawn_jitter_m: tuple[float, float] = (0.03, 0.03)
+    spawn_jitter_m: tuple[float, float] = (0.03, 0.02)
     """Each panel's centre is drawn uniformly in its nominal centre +- this (x, y) [m]."""
-    yaw_jitter_rad: float = 0.3
+    yaw_jitter_rad: float = 0.25
     """Each panel's yaw is drawn uniformly in +- this [rad]."""
     press_min_depth_m: float = 0.001
     """Truth "press": the target is at least this deep [m] ..."""
@@ -199,7 +201,7 @@ def build_button_panel(
     return panel
 
 
-@register_env("AWDA-PressButton-v1", max_episode_steps=200)
+@register_env("AWDA-PressButton-v1", max_episode_steps=160)
 class PressButtonEnv(AWDATaskEnv):
     """
     **Task Description:**
@@ -292,8 +294,11 @@ class PressButtonEnv(AWDATaskEnv):
         return pos + torch.tensor([0.0, 0.0, self.layout.protrusion_m], device=self.device)
 
     def target_cap_top(self) -> torch.Tensor:
-        """(n, 3) the target button's cap top centre [m]."""
-        return self.button_cap_top()[torch.arange(self.num_envs, device=self.device), self.task]
+        """(n, 3) the target button's cap top centre [m] (reads only the targets' link poses)."""
+        out = torch.zeros((self.num_envs, 3), device=self.device)
+        for v in torch.unique(self.task).tolist():
+            out = torch.where((self.task == v)[:, None], self.buttons[v].pose.p, out)
+        return out + torch.tensor([0.0, 0.0, self.layout.protrusion_m], device=self.device)
 
     def target_rest_cap_top(self) -> torch.Tensor:
         """(n, 3) where the target's cap top is when the button is not pressed [m]."""

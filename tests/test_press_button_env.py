@@ -1,0 +1,149 @@
+"""AWDA-PressButton-v1: layout checks (fast), the checks ManiSkill applies to its envs (slow)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from awda_bench.envs.press_button import PressButtonLayout
+from awda_bench.errors import UsageError
+from awda_bench.experts.press_button import PressButtonExpert, PressButtonExpertConfig
+from awda_bench.policies.base import EpisodeContext, EpisodeSpec
+
+# ---------------------------------------------------------------------------- fast
+
+
+def test_layout_has_two_distinct_panels_and_six_distinct_buttons() -> None:
+    lay = PressButtonLayout()
+    assert len(lay.panels) == 2
+    colors = [c for panel in lay.panels for c in panel.button_colors]
+    assert len(set(colors)) == 6
+    assert lay.panels[0].plate_color != lay.panels[1].plate_color
+    assert lay.panels[0].plate_size_m != lay.panels[1].plate_size_m
+    # success is SPEC's "pressed >= 4 cm" scaled to our travel, reachable before the stop
+    assert 0 < lay.success_depth_m < lay.travel_m <= lay.protrusion_m
+
+
+def test_layout_and_expert_config_validate() -> None:
+    with pytest.raises(ValueError, match="success_depth_m"):
+        PressButtonLayout(success_depth_m=0.03)
+    with pytest.raises(ValueError, match="travel_m"):
+        PressButtonLayout(travel_m=0.03, success_depth_m=0.02)
+    with pytest.raises(ValueError, match="2 panels"):
+        PressButtonLayout(panels=PressButtonLayout().panels[:1])
+    with pytest.raises(ValueError, match="hold_steps"):
+        PressButtonExpertConfig(hold_steps=0)
+
+
+# ---------------------------------------------------------------------------- slow (simulation)
+
+
+@pytest.fixture(scope="module")
+def env():
+    import awda_bench.envs  # noqa: F401
+
+    e = gym.make("AWDA-PressButton-v1", obs_mode="state", reward_mode="none", num_envs=1)
+    yield e
+    e.close()
+
+
+def _panel_poses(env) -> np.ndarray:
+    return torch.cat([p.pose.raw_pose for p in env.unwrapped.panels], dim=1).cpu().numpy()
+
+
+@pytest.mark.slow
+def test_make_reset_step(env) -> None:
+    base = env.unwrapped
+    assert base.robot_uids == "panda_awda" and base.family == "press_button"
+    assert base.num_variations == 6 and not base.has_grasp_target
+    obs, info = env.reset(seed=0, options={"task": 4})
+    assert torch.isfinite(obs).all()
+    assert int(info["task"][0]) == 4 and not bool(info["success"][0])
+    assert int(base.target_panel[0]) == 1 and int(base.target_button[0]) == 1
+    obs, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+    assert torch.isfinite(obs).all()
+    assert set(info) >= {"success", "success_once", "button_depth_m", "task"}
+    np.testing.assert_allclose(base.button_qpos().cpu().numpy(), 0.0, atol=1e-4)
+
+
+@pytest.mark.slow
+def test_same_seed_same_layout_different_seed_different_layout(env) -> None:
+    env.reset(seed=7, options={"task": 2})
+    first = _panel_poses(env)
+    env.reset(seed=8, options={"task": 2})
+    other = _panel_poses(env)
+    env.reset(seed=7, options={"task": 2})
+    np.testing.assert_array_equal(first, _panel_poses(env))
+    assert np.abs(first - other).max() > 1e-3
+
+
+@pytest.mark.slow
+def test_state_dict_round_trip_restores_buttons_and_task(env) -> None:
+    base = env.unwrapped
+    env.reset(seed=4, options={"task": 5})
+    base.panels[1].set_qpos(torch.tensor([[0.0, 0.0, -0.012]]))
+    state = base.get_state_dict()
+    before = (_panel_poses(env), base.button_qpos().clone())
+    env.reset(seed=5, options={"task": 0})
+    base.set_state_dict(state)
+    np.testing.assert_allclose(_panel_poses(env), before[0], atol=1e-6)
+    torch.testing.assert_close(base.button_qpos(), before[1])
+    assert int(base.task[0]) == 5
+    assert float(base.target_depth_m()[0]) == pytest.approx(0.012, abs=1e-6)
+
+
+@pytest.mark.slow
+def test_nan_action_and_bad_variation_are_rejected(env) -> None:
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.array([np.nan, 0.0, 0.0, 0.0], dtype=np.float32))
+    with pytest.raises(UsageError, match="0..5"):
+        env.reset(seed=0, options={"task": 6})
+
+
+@pytest.mark.slow
+def test_success_only_for_the_target_button_and_buttons_spring_back(env) -> None:
+    base = env.unwrapped
+    lay = base.layout
+    for task in (0, 4):
+        env.reset(seed=1, options={"task": task})
+        for v in range(6):
+            qpos = torch.zeros((1, 6))
+            qpos[0, v] = -lay.travel_m
+            base.panels[0].set_qpos(qpos[:, :3])
+            base.panels[1].set_qpos(qpos[:, 3:])
+            assert bool(base.evaluate()["success"][0]) == (v == task)
+    # shallower than the success depth: not a success
+    env.reset(seed=1, options={"task": 0})
+    base.panels[0].set_qpos(torch.tensor([[-(lay.success_depth_m - 0.002), 0.0, 0.0]]))
+    assert not bool(base.evaluate()["success"][0])
+    # pressed and let go: the spring pops it back within half a second
+    base.panels[0].set_qpos(torch.tensor([[-lay.travel_m, 0.0, 0.0]]))
+    for _ in range(10):
+        env.step(np.zeros(4, dtype=np.float32))
+    assert float(base.target_depth_m()[0]) < 0.001
+    assert not bool(base.truth_signals()["press"][0])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("task", "seed"), [(1, 0), (5, 3)])
+def test_expert_presses_the_button_and_the_press_truth_fires(env, task: int, seed: int) -> None:
+    base = env.unwrapped
+    obs, _ = env.reset(seed=seed, options={"task": task})
+    expert = PressButtonExpert()
+    spec = EpisodeSpec(suite="mosaic", task=task, episode=0, seed=seed, demo_seed=seed)
+    expert.reset(EpisodeContext(env=base, spec=spec))
+    pressing, others_max = [], 0.0
+    for _ in range(160):
+        obs, _, _, _, info = env.step(expert.act(obs))
+        pressing.append(bool(base.truth_signals()["press"][0]))
+        depths = -base.button_qpos()[0].cpu().numpy()
+        others_max = max(others_max, float(np.delete(depths, task).max()))
+        if expert.done:
+            break
+    assert expert.done and bool(info["success_once"][0])
+    assert not bool(info["success"][0])  # released: the button popped back
+    assert sum(pressing) >= expert.config.hold_steps
+    assert others_max < 0.002  # no other button was pushed
