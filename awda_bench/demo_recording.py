@@ -22,6 +22,7 @@ import numpy as np
 from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.experts import EMBODIMENT_NAMES, make_expert
 from awda_bench.policies.base import EpisodeContext, EpisodeSpec
+from awda_bench.render_device import render_backend
 from awda_bench.suites import Suite, load_suite
 from awda_bench.trajectory import Trajectory
 
@@ -58,6 +59,7 @@ def make_demo_env(suite: Suite | str, embodiment: str = "demonstrator", env_id: 
         reward_mode="none",
         num_envs=1,
         max_episode_steps=suite.horizon_steps,
+        render_backend=render_backend(),
         sensor_configs={THIRD_PERSON: {"height": suite.camera.height, "width": suite.camera.width}},
     )
 

@@ -71,6 +71,14 @@ def probe_render_device() -> RenderDevice:
     return RenderDevice(name=name, software=software, mesa_version=_mesa_version() if software else None)
 
 
+def render_backend() -> str:
+    """ManiSkill ``render_backend`` for this machine: ``"gpu"`` with CUDA, else ``"cpu"`` (what
+    ManiSkill would fall back to anyway, minus its warning on every env built)."""
+    import torch
+
+    return "gpu" if torch.cuda.is_available() else "cpu"
+
+
 def require_renderer() -> RenderDevice:
     """Raise :class:`RendererUnavailableError` (one line, with the fix) unless SAPIEN can render."""
     return probe_render_device()

@@ -79,7 +79,9 @@ def render_test_frame() -> tuple[np.ndarray, float]:
     import awda_bench.robot  # noqa: F401  (registers panda_awda and AWDA-EmptyTable-v1)
     from awda_bench.robot.cameras import capture_rgb
 
-    env = gym.make("AWDA-EmptyTable-v1", obs_mode="state", reward_mode="none")
+    from awda_bench.render_device import render_backend
+
+    env = gym.make("AWDA-EmptyTable-v1", obs_mode="state", reward_mode="none", render_backend=render_backend())
     try:
         env.reset(seed=0)
         start = time.perf_counter()

@@ -13,6 +13,7 @@ from typing import Any
 import gymnasium as gym
 
 from awda_bench.errors import UsageError
+from awda_bench.render_device import render_backend
 from awda_bench.suites import Suite
 
 CONTROL_MODE = "pd_ee_delta_pos_mink"
@@ -45,6 +46,7 @@ def make_env(suite: Suite, *, env_id: str | None = None, render_mode: str | None
             reward_mode="none",
             num_envs=1,
             render_mode=render_mode,
+            render_backend=render_backend(),
             max_episode_steps=suite.horizon_steps,
             disable_env_checker=True,
         )

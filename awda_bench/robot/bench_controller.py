@@ -15,6 +15,8 @@ import time
 
 import numpy as np
 
+from awda_bench.render_device import render_backend
+
 MODES = ("pd_ee_delta_pos_mink", "pd_ee_delta_pos", "pd_joint_pos")
 """Control modes compared (first = ours)."""
 
@@ -46,7 +48,14 @@ def _bench_scene(env_id: str, steps: int, rounds: int) -> None:
     import gymnasium as gym
 
     envs = {
-        mode: gym.make(env_id, obs_mode="state", reward_mode="none", control_mode=mode, robot_uids="panda_awda")
+        mode: gym.make(
+            env_id,
+            obs_mode="state",
+            reward_mode="none",
+            control_mode=mode,
+            robot_uids="panda_awda",
+            render_backend=render_backend(),
+        )
         for mode in MODES
     }
     # ManiSkill's pd_ee_delta_pos spans +-0.1 m per unit action; ours +-0.02 m: same motion.

@@ -30,13 +30,13 @@ from mani_skill.agents.base_agent import Keyframe
 from mani_skill.agents.controllers.pd_joint_pos import (
     PDJointPosController,
     PDJointPosControllerConfig,
-    PDJointPosMimicController,
-    PDJointPosMimicControllerConfig,
 )
 from mani_skill.agents.registration import register_agent
 from mani_skill.agents.robots.floating_panda_gripper import FloatingPandaGripper
 from mani_skill.utils import common
 from mani_skill.utils.structs.actor import Actor
+
+from awda_bench.robot.controller import BinaryGripperControllerConfig
 
 DEMONSTRATOR_UID = "awda_demonstrator"
 """ManiSkill agent uid of the demonstrator."""
@@ -109,43 +109,6 @@ class FloatingDeltaPosControllerConfig(PDJointPosControllerConfig):
             )
 
 
-class ClosePositiveGripperController(PDJointPosMimicController):
-    """One number per env: > 0 drives the fingers closed, <= 0 open (the agent's convention)."""
-
-    config: ClosePositiveGripperControllerConfig
-
-    def _initialize_action_space(self) -> None:
-        self.single_action_space = spaces.Box(-1.0, 1.0, shape=(1,), dtype=np.float32)
-
-    def set_action(self, action: torch.Tensor) -> None:
-        closed = action[:, :1] > 0
-        target = torch.where(
-            closed,
-            torch.full_like(action[:, :1], self.config.closed_qpos_m),
-            torch.full_like(action[:, :1], self.config.open_qpos_m),
-        ).to(self._target_qpos.dtype)
-        self._step = 0
-        self._start_qpos = self.qpos
-        self._target_qpos[:, self.control_joint_indices] = target
-        self._target_qpos[:, self.mimic_joint_indices] = (
-            self._target_qpos[:, self.mimic_control_joint_indices] * self._multiplier[None, :]
-            + self._offset[None, :]
-        )
-        self.set_drive_targets(self._target_qpos)
-
-
-@dataclass
-class ClosePositiveGripperControllerConfig(PDJointPosMimicControllerConfig):
-    """Finger targets for the two gripper states."""
-
-    closed_qpos_m: float = -0.01
-    """Finger joint target when closing [m] (below the 0 limit so thin objects feel force)."""
-    open_qpos_m: float = 0.04
-    """Finger joint target when open [m] (the joint's upper limit)."""
-    normalize_action: bool = False
-    controller_cls = ClosePositiveGripperController
-
-
 @register_agent()
 class AwdaDemonstrator(FloatingPandaGripper):
     """Floating Panda hand, dark blue, 4-D action space (see the module docstring)."""
@@ -175,13 +138,15 @@ class AwdaDemonstrator(FloatingPandaGripper):
             damping=self.root_damping,
             force_limit=self.root_force_limit,
         )
-        gripper = ClosePositiveGripperControllerConfig(
+        # the agent's gripper controller: action[3] > 0 closes, the command is controller state
+        gripper = BinaryGripperControllerConfig(
             joint_names=self.gripper_joint_names,
             lower=-0.01,
             upper=0.04,
             stiffness=self.gripper_stiffness,
             damping=self.gripper_damping,
             force_limit=self.gripper_force_limit,
+            mimic={"panda_finger_joint2": {"joint": "panda_finger_joint1"}},
         )
         return {DEMONSTRATOR_CONTROL_MODE: dict(arm=root, gripper=gripper)}
 
