@@ -99,11 +99,11 @@ class DoorEnv(AWDATaskEnv):
     family: ClassVar[str] = "door"
     num_variations: ClassVar[int] = NUM_DOOR_VARIATIONS
     has_grasp_target: ClassVar[bool] = False
-    third_person_eye_m: ClassVar[tuple[float, float, float]] = (-0.62, 0.0, 0.72)
-    """Behind and above the robot's base: the cabinet fronts face the robot, so the camera looks
-    over the arm at them (the pick-place camera at +x would see their backs)."""
-    third_person_target_m: ClassVar[tuple[float, float, float]] = (0.02, 0.0, 0.10)
-    third_person_fov_rad: ClassVar[float] = 1.05
+    third_person_eye_m: ClassVar[tuple[float, float, float]] = (-0.46, 0.0, 0.44)
+    """In front of the cabinets, under the arm's upper links, looking at their fronts (they face
+    the robot, so the pick-place camera at +x would see their backs)."""
+    third_person_target_m: ClassVar[tuple[float, float, float]] = (0.10, 0.0, 0.12)
+    third_person_fov_rad: ClassVar[float] = 1.25
 
     _TASK_STATE: ClassVar[tuple[str, ...]] = (*AWDATaskEnv._TASK_STATE,)
 
@@ -222,8 +222,9 @@ class DoorEnv(AWDATaskEnv):
             out = torch.where(door == j, self.agent.is_grasping(link), out)
         return out
 
-    def is_pushing_target(self, min_force_n: float = 0.5) -> torch.Tensor:
-        """(n,) a finger presses on the target door with >= ``min_force_n`` [N], no grasp."""
+    def is_pushing_target(self, min_force_n: float = 0.05) -> torch.Tensor:
+        """(n,) a finger presses on the target door with >= ``min_force_n`` [N], no grasp (the
+        passive, damped joint resists a steady push with only a few tenths of a newton)."""
         f1, f2 = self._target_contacts()
         return (torch.maximum(f1, f2) >= min_force_n) & ~self.is_grasping_target()
 

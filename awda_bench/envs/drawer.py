@@ -105,11 +105,11 @@ class DrawerEnv(AWDATaskEnv):
     family: ClassVar[str] = "drawer"
     num_variations: ClassVar[int] = NUM_DRAWER_VARIATIONS
     has_grasp_target: ClassVar[bool] = False
-    third_person_eye_m: ClassVar[tuple[float, float, float]] = (-0.42, 0.0, 0.42)
-    """In front of the cabinets, under the arm's upper links: the fronts face the robot, so the
-    pick-place camera at +x would see their backs."""
-    third_person_target_m: ClassVar[tuple[float, float, float]] = (0.05, 0.0, 0.10)
-    third_person_fov_rad: ClassVar[float] = 1.1
+    third_person_eye_m: ClassVar[tuple[float, float, float]] = (-0.46, 0.0, 0.44)
+    """In front of the cabinets, under the arm's upper links, looking at their fronts (they face
+    the robot, so the pick-place camera at +x would see their backs)."""
+    third_person_target_m: ClassVar[tuple[float, float, float]] = (0.10, 0.0, 0.12)
+    third_person_fov_rad: ClassVar[float] = 1.25
 
     def __init__(self, *args: Any, layout: DrawerLayout | None = None, **kwargs: Any) -> None:
         self.layout = layout or DrawerLayout()
@@ -205,8 +205,9 @@ class DrawerEnv(AWDATaskEnv):
                 out = torch.where(drawer == j, self.agent.is_grasping(link), out)
         return out
 
-    def is_pushing_target(self, min_force_n: float = 0.5) -> torch.Tensor:
-        """(n,) a finger presses on the target drawer with >= ``min_force_n`` [N], no grasp."""
+    def is_pushing_target(self, min_force_n: float = 0.05) -> torch.Tensor:
+        """(n,) a finger presses on the target drawer with >= ``min_force_n`` [N], no grasp (the
+        passive, damped joint resists a steady push with only a few tenths of a newton)."""
         drawer = self.target_drawer
         force = torch.zeros(self.num_envs, device=self.device)
         for j, link in enumerate(self.drawer_links):

@@ -11,9 +11,10 @@ needs a grasp)::
             in front of the panel,          fingers on the panel, angle
             fingers closed                  led toward close_target
 
-SWING steps the hinge angle ahead of the measured one by ``lead_rad`` every control step (closed
-loop on the door, so a slipping grip or a lagging arm never outruns it). Each phase ends on its
-tolerance or its step budget, so a stuck phase never stalls the episode. Works for any embodiment of
+SWING aims at the handle (or push point) placed with the hinge ``lead_rad`` ahead of the measured
+angle, every control step (closed loop on the door, so a slipping grip or a lagging arm never
+outruns it). Each phase ends on its tolerance or its step budget, so a stuck phase never stalls the
+episode. Works for any embodiment of
 :mod:`awda_bench.envs.embodiments` (step size and grip sign come from there).
 """
 
@@ -138,6 +139,8 @@ class DoorExpert:
         self.pull = np.zeros(0, dtype=bool)
         """(n,) True: open by grasping the handle; False: close by pushing the panel."""
         self._retreat_z = np.zeros(0)
+        self._grip_offset = np.zeros((0, 3))
+        """(n, 3) TCP minus handle top when the grip closed [m]."""
 
     # ------------------------------------------------------------------ Policy protocol
     def reset(self, ctx: EpisodeContext) -> None:
@@ -147,6 +150,7 @@ class DoorExpert:
         self.phase_steps = np.zeros(n, dtype=np.int64)
         self.pull = self._env.wants_open.cpu().numpy().astype(bool)
         self._retreat_z = np.zeros(n)
+        self._grip_offset = np.zeros((n, 3))
 
     @property
     def done(self) -> bool:
@@ -189,8 +193,8 @@ class DoorExpert:
                 elif phase == Phase.DESCEND:
                     goal[i] = (handle_now[i, 0], handle_now[i, 1], grasp_z)
                 elif phase == Phase.SWING:
-                    # carry the grasp point along the arc: the handle's move to the led angle
-                    goal[i] = tcp[i] + (handle_led[i] - handle_now[i])
+                    # the grasp point on the handle, carried to the led angle
+                    goal[i] = handle_led[i] + self._grip_offset[i]
                     goal[i, 2] = grasp_z
             else:
                 push_z = top[i] - cfg.push_depth_m
@@ -279,6 +283,8 @@ class DoorExpert:
             if tcp[2] >= self._retreat_z[i] - 2 * cfg.z_tolerance_m or over_budget:
                 nxt = Phase.DONE
         if nxt != phase:
+            if nxt == Phase.SWING and self.pull[i]:
+                self._grip_offset[i] = tcp - handle
             if nxt == Phase.RETREAT:
                 self._retreat_z[i] = tcp[2] + cfg.retreat_m
             self.phase[i] = int(nxt)

@@ -10,8 +10,9 @@ closing pushes the handle head's front with the closed fingers::
             in front of the head,           fingers on the head,
             fingers closed                  push to close_target
 
-SLIDE leads the measured slide by ``lead_m`` every control step (closed loop on the drawer). Each
-phase ends on its tolerance or its step budget. Works for any embodiment of
+SLIDE aims at the handle led ``lead_m`` beyond its measured position every control step (closed
+loop on the drawer, so a slipping grip never drags the hand away from the handle). Each phase ends
+on its tolerance or its step budget. Works for any embodiment of
 :mod:`awda_bench.envs.embodiments` (step size and grip sign come from there).
 """
 
@@ -45,8 +46,9 @@ class DrawerExpertConfig:
     """Open: pull until the drawer is slid out this far [m] (success needs 0.12)."""
     close_target_m: float = 0.002
     """Close: push until the drawer is at most this far out [m] (success needs 0.005)."""
-    lead_m: float = 0.03
-    """SLIDE goal: this far ahead of the measured slide [m] (not clipped at the target)."""
+    lead_m: float = 0.012
+    """SLIDE goal: this far ahead of the measured slide [m] (not clipped at the target; it also caps
+    the pull speed: a faster pull slips out of the pads on the fast demonstrator)."""
     hover_clearance_m: float = 0.09
     """HOVER height above the handle head's centre [m] (the fingertips, 1 cm below the TCP, pass
     over the drawer front's top edge, 6.3 cm above the handle)."""
@@ -111,6 +113,8 @@ class DrawerExpert:
         self.pull = np.zeros(0, dtype=bool)
         """(n,) True: open by grasping and pulling; False: close by pushing."""
         self._retreat_z = np.zeros(0)
+        self._grip_offset = np.zeros((0, 3))
+        """(n, 3) TCP minus handle centre when the grip closed [m]."""
 
     # ------------------------------------------------------------------ Policy protocol
     def reset(self, ctx: EpisodeContext) -> None:
@@ -120,6 +124,7 @@ class DrawerExpert:
         self.phase_steps = np.zeros(n, dtype=np.int64)
         self.pull = self._env.wants_open.cpu().numpy().astype(bool)
         self._retreat_z = np.zeros(n)
+        self._grip_offset = np.zeros((n, 3))
 
     @property
     def done(self) -> bool:
@@ -161,8 +166,8 @@ class DrawerExpert:
             elif phase == Phase.DESCEND:
                 goal[i] = (target_xy[0], target_xy[1], work_z)
             elif phase == Phase.SLIDE:
-                if self.pull[i]:  # carry the grasp point out along the axis
-                    goal[i] = tcp[i] + axis[i] * cfg.lead_m
+                if self.pull[i]:  # the grasp point on the handle, led out along the axis
+                    goal[i] = handle[i] + self._grip_offset[i] + axis[i] * cfg.lead_m
                 else:  # fingertips pressed on the head, led inward along the axis
                     led = head_front[i] - axis[i] * cfg.lead_m
                     goal[i] = led + axis[i] * (support[i] - cfg.press_in_m)
@@ -218,6 +223,8 @@ class DrawerExpert:
             if tcp[2] >= self._retreat_z[i] - 2 * cfg.z_tolerance_m or over_budget:
                 nxt = Phase.DONE
         if nxt != phase:
+            if nxt == Phase.SLIDE:
+                self._grip_offset[i] = tcp - handle
             if nxt == Phase.RETREAT:
                 self._retreat_z[i] = tcp[2] + cfg.retreat_m
             self.phase[i] = int(nxt)

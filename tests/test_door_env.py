@@ -1,0 +1,261 @@
+"""AWDA-Door-v1: geometry and config checks (fast), the checks ManiSkill applies to its envs and the
+scripted expert on both embodiments (slow)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from awda_bench.envs.articulated import DoorCabinetSpec, hinge_joint_quat, rotate_z
+from awda_bench.envs.door import DoorLayout
+from awda_bench.errors import UsageError
+from awda_bench.experts.door import DoorExpert, DoorExpertConfig
+from awda_bench.policies.base import EpisodeContext, EpisodeSpec
+
+REST_HAND_HALF_LENGTH_M = 0.104
+"""The Panda hand at the agent's rest pose spans |y| <= this around y = 0 [m]."""
+
+# ---------------------------------------------------------------------------- fast
+
+
+def _rotate(q: list[float], v: np.ndarray) -> np.ndarray:
+    w, x, y, z = q
+    r = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    return r @ v
+
+
+@pytest.mark.parametrize("sign", [-1, 1])
+def test_hinge_joint_frame_turns_about_vertical_axis(sign: int) -> None:
+    axis = _rotate(hinge_joint_quat(sign), np.array([1.0, 0.0, 0.0]))
+    np.testing.assert_allclose(axis, [0.0, 0.0, sign], atol=1e-12)
+
+
+def test_rotate_z_quarter_turn() -> None:
+    v = torch.tensor([[1.0, 0.0, 0.3]])
+    np.testing.assert_allclose(
+        rotate_z(v, torch.tensor([np.pi / 2])).numpy(), [[0, 1, 0.3]], atol=1e-6
+    )
+
+
+def test_two_doors_differ_and_clear_the_resting_hand() -> None:
+    lay = DoorLayout()
+    a, b = lay.doors
+    assert a.panel_color != b.panel_color and a.hinge_side == -b.hinge_side
+    for spec in lay.doors:
+        # doors open toward the robot: the opening sign turns the panel's free edge to -x
+        free_edge = rotate_z(
+            torch.tensor([[0.0, -spec.hinge_side * spec.panel_width_m, 0.0]]),
+            torch.tensor([spec.opening_sign * 0.5]),
+        )
+        assert float(free_edge[0, 0]) < 0
+        # the handle's top is flush with the panel top; the bar stands clear of the face
+        assert spec.handle_top_z_m == pytest.approx(spec.height_m - spec.panel_gap_m)
+        assert spec.handle_standoff_m - spec.handle_radius_m > 0.03
+        # the handle (and the panel edge) never under the hand resting at y = 0
+        handle_y = spec.center_xy_m[1] + spec.hinge_side * spec.width_m / 2
+        handle_y -= spec.hinge_side * spec.handle_from_hinge_m
+        assert (
+            abs(handle_y) - spec.handle_radius_m - lay.placement.xy_m[1] > REST_HAND_HALF_LENGTH_M
+        )
+
+
+def test_layout_spec_and_expert_config_validate() -> None:
+    with pytest.raises(ValueError, match="hinge_side"):
+        DoorCabinetSpec(name="d", center_xy_m=(0, 0), hinge_side=0, panel_color=(1, 0, 0, 1))
+    with pytest.raises(ValueError, match="handle_standoff_m"):
+        DoorCabinetSpec(
+            name="d",
+            center_xy_m=(0, 0),
+            hinge_side=1,
+            panel_color=(1, 0, 0, 1),
+            handle_standoff_m=0.005,
+        )
+    with pytest.raises(ValueError, match="close_start_rad"):
+        DoorLayout(close_start_rad=(0.3, 0.5))
+    with pytest.raises(ValueError, match="open_success_rad"):
+        DoorLayout(open_success_rad=2.0)
+    with pytest.raises(ValueError, match="lead_rad"):
+        DoorExpertConfig(lead_rad=0.0)
+    with pytest.raises(ValueError, match="close_steps"):
+        DoorExpertConfig(close_steps=0)
+
+
+# ---------------------------------------------------------------------------- slow (simulation)
+
+
+@pytest.fixture(scope="module")
+def env():
+    import awda_bench.envs  # noqa: F401
+
+    e = gym.make("AWDA-Door-v1", obs_mode="state", reward_mode="none", num_envs=1)
+    yield e
+    e.close()
+
+
+def _scene_state(env) -> np.ndarray:
+    base = env.unwrapped
+    poses = torch.cat([c.pose.raw_pose for c in base.cabinets], dim=1)
+    return torch.cat([poses, base.door_angles()], dim=1).cpu().numpy()
+
+
+@pytest.mark.slow
+def test_make_reset_step(env) -> None:
+    base = env.unwrapped
+    assert base.robot_uids == "panda_awda" and base.family == "door"
+    assert base.num_variations == 4 and not base.has_grasp_target
+    obs, info = env.reset(seed=0, options={"task": 2})
+    assert torch.isfinite(obs).all()
+    assert int(info["task"][0]) == 2 and not bool(info["success"][0])
+    assert int(base.target_door[0]) == 1 and bool(base.wants_open[0])
+    np.testing.assert_allclose(base.door_angles().cpu().numpy(), 0.0, atol=1e-6)
+    obs, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+    assert torch.isfinite(obs).all()
+    assert set(info) >= {"success", "success_once", "door_angle_rad", "task"}
+    # close variations: both doors start open inside close_start_rad
+    env.reset(seed=0, options={"task": 1})
+    lo, hi = base.layout.close_start_rad
+    angles = base.door_angles().cpu().numpy()
+    assert ((angles >= lo - 1e-6) & (angles <= hi + 1e-6)).all()
+
+
+@pytest.mark.slow
+def test_same_seed_same_layout_different_seed_different_layout(env) -> None:
+    env.reset(seed=7, options={"task": 3})
+    first = _scene_state(env)
+    env.reset(seed=8, options={"task": 3})
+    other = _scene_state(env)
+    env.reset(seed=7, options={"task": 3})
+    np.testing.assert_array_equal(first, _scene_state(env))
+    assert np.abs(first - other).max() > 1e-3
+
+
+@pytest.mark.slow
+def test_placement_noise_stays_in_bounds(env) -> None:
+    base = env.unwrapped
+    noise = base.layout.placement
+    for seed in range(6):
+        env.reset(seed=seed, options={"task": 0})
+        for cabinet, spec in zip(base.cabinets, base.layout.doors, strict=True):
+            p = cabinet.pose.p[0].cpu().numpy()
+            q = cabinet.pose.q[0].cpu().numpy()
+            assert abs(p[0] - spec.center_xy_m[0]) <= noise.xy_m[0] + 1e-6
+            assert abs(p[1] - spec.center_xy_m[1]) <= noise.xy_m[1] + 1e-6
+            assert abs(2 * np.arctan2(q[3], q[0])) <= noise.yaw_rad + 1e-6
+
+
+@pytest.mark.slow
+def test_handle_position_follows_the_door_link(env) -> None:
+    base = env.unwrapped
+    for task, angle in ((0, 0.0), (1, 0.7), (2, 0.3), (3, 1.0)):
+        env.reset(seed=task, options={"task": task})
+        cabinet = base.cabinets[int(base.target_door[0])]
+        cabinet.set_qpos(torch.tensor([[angle]]))
+        spec = base.target_spec(0)
+        link = base.door_links[int(base.target_door[0])]
+        yaw = 2 * torch.atan2(link.pose.q[:, 3], link.pose.q[:, 0])
+        local = torch.tensor([spec.handle_from_hinge_local_m()])
+        expected = link.pose.p + rotate_z(local, yaw)
+        got = base.handle_position()
+        np.testing.assert_allclose(got[:, :2].numpy(), expected[:, :2].numpy(), atol=1e-5)
+        assert float(got[0, 2]) == pytest.approx(spec.handle_top_z_m)
+        assert float(base.target_angle()[0]) == pytest.approx(angle, abs=1e-5)
+
+
+@pytest.mark.slow
+def test_success_thresholds_and_door_stays_where_left(env) -> None:
+    base = env.unwrapped
+    lay = base.layout
+    env.reset(seed=0, options={"task": 0})  # open door 0
+    base.cabinets[0].set_qpos(torch.tensor([[lay.open_success_rad - 0.05]]))
+    assert not bool(base.evaluate()["success"][0])
+    base.cabinets[0].set_qpos(torch.tensor([[lay.open_success_rad + 0.05]]))
+    assert bool(base.evaluate()["success"][0])
+    for _ in range(10):  # passive, damped hinge: no drift
+        env.step(np.zeros(4, dtype=np.float32))
+    assert float(base.target_angle()[0]) == pytest.approx(lay.open_success_rad + 0.05, abs=0.01)
+    env.reset(seed=0, options={"task": 3})  # close door 1 (starts open)
+    assert not bool(base.evaluate()["success"][0])
+    base.cabinets[1].set_qpos(torch.tensor([[lay.close_success_rad - 0.02]]))
+    assert bool(base.evaluate()["success"][0])
+    base.cabinets[0].set_qpos(torch.tensor([[0.0]]))  # the other door does not count
+    base.cabinets[1].set_qpos(torch.tensor([[0.5]]))
+    assert not bool(base.evaluate()["success"][0])
+
+
+@pytest.mark.slow
+def test_state_dict_round_trip_restores_doors_and_task(env) -> None:
+    base = env.unwrapped
+    env.reset(seed=4, options={"task": 1})
+    state = base.get_state_dict()
+    before = _scene_state(env)
+    qpos = base.agent.robot.get_qpos().clone()
+    for _ in range(5):
+        env.step(np.array([1.0, -1.0, -1.0, 1.0], dtype=np.float32))
+    env.reset(seed=5, options={"task": 2})
+    base.set_state_dict(state)
+    np.testing.assert_allclose(_scene_state(env), before, atol=1e-6)
+    torch.testing.assert_close(base.agent.robot.get_qpos(), qpos)
+    assert int(base.task[0]) == 1
+
+
+@pytest.mark.slow
+def test_nan_action_is_rejected(env) -> None:
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.array([np.nan, 0.0, 0.0, 0.0], dtype=np.float32))
+
+
+@pytest.mark.slow
+def test_bad_variation_is_a_usage_error(env) -> None:
+    with pytest.raises(UsageError, match="0..3"):
+        env.reset(seed=0, options={"task": 4})
+    with pytest.raises(UsageError, match="0..3"):
+        env.reset(seed=0, options={"task": -1})
+
+
+def _run_expert(env, task: int, seed: int, horizon: int = 200) -> tuple[bool, set[str]]:
+    """Run the expert; returns (success at the end, the truth signals seen true at some step)."""
+    base = env.unwrapped
+    obs, _ = env.reset(seed=seed, options={"task": task})
+    expert = DoorExpert()
+    spec = EpisodeSpec(suite="mosaic", task=task, episode=0, seed=seed, demo_seed=seed + 1)
+    expert.reset(EpisodeContext(env=base, spec=spec))
+    seen: set[str] = set()
+    info: dict = {}
+    for _ in range(horizon):
+        obs, _, _, _, info = env.step(expert.act(obs))
+        seen |= {k for k, v in base.truth_signals().items() if bool(v[0])}
+        if expert.done:
+            break
+    assert expert.done, f"expert did not finish within {horizon} steps"
+    return bool(info["success"][0]), seen
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("task", "seed"), [(0, 0), (3, 1)])
+def test_expert_succeeds_on_the_agent(env, task: int, seed: int) -> None:
+    success, seen = _run_expert(env, task, seed)
+    assert success
+    assert ("grasp" if task % 2 == 0 else "press") in seen
+
+
+@pytest.mark.slow
+def test_expert_succeeds_on_the_demonstrator() -> None:
+    import awda_bench.envs  # noqa: F401
+
+    e = gym.make(
+        "AWDA-Door-v1", robot_uids="awda_demonstrator", obs_mode="state", reward_mode="none"
+    )
+    try:
+        assert _run_expert(e, 2, 3)[0]
+        assert _run_expert(e, 1, 4)[0]
+    finally:
+        e.close()

@@ -1,0 +1,228 @@
+"""AWDA-Drawer-v1: geometry and config checks (fast), the checks ManiSkill applies to its envs and
+the scripted expert on both embodiments (slow)."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+
+from awda_bench.envs.articulated import DrawerCabinetSpec, rotate_z
+from awda_bench.envs.drawer import DrawerLayout
+from awda_bench.errors import UsageError
+from awda_bench.experts.drawer import DrawerExpert, DrawerExpertConfig
+from awda_bench.policies.base import EpisodeContext, EpisodeSpec
+
+REST_HAND_HALF_LENGTH_M = 0.104
+"""The Panda hand at the agent's rest pose spans |y| <= this around y = 0 [m]."""
+HAND_HALF_DEPTH_M = 0.032
+"""Half extent of the Panda hand body along world x when pointing down [m]."""
+REACH_M = 0.75
+"""The agent reaches targets within this horizontal distance of its base axis [m]."""
+BASE_X_M = -0.615
+"""Agent base x [m]."""
+
+# ---------------------------------------------------------------------------- fast
+
+
+def test_cabinets_differ_and_handles_are_reachable_and_clear() -> None:
+    lay = DrawerLayout()
+    a, b = lay.cabinets
+    assert a.front_color != b.front_color
+    for spec in lay.cabinets:
+        # both drawer handles below the Panda's top-down reach height
+        assert max(spec.drawer_center_z_m) + spec.handle_head_size_m[2] / 2 <= 0.35
+        # the fingers (8 cm apart when open) fit around the head with room to spare
+        assert spec.handle_head_size_m[1] <= 0.08 - 0.02
+        # the hand grasping a head stays in front of the cabinet's face
+        assert spec.handle_stem_m + spec.handle_head_size_m[0] / 2 - HAND_HALF_DEPTH_M > 0.01
+        # the carcass stands behind the hand resting at x = 0, and the drawer fronts (which come
+        # out toward the robot) beside it
+        yaw_shift = spec.width_m / 2 * np.sin(lay.placement.yaw_rad)
+        assert spec.center_xy_m[0] - lay.placement.xy_m[0] - yaw_shift > HAND_HALF_DEPTH_M
+        front_edge = abs(spec.center_xy_m[1]) - spec.width_m / 2 + spec.wall_m + spec.gap_m
+        assert front_edge - lay.placement.xy_m[1] > REST_HAND_HALF_LENGTH_M
+        for y, z in zip(spec.handle_y_m, spec.drawer_center_z_m, strict=True):
+            x = spec.center_xy_m[0] + spec.handle_center_x_m + lay.placement.xy_m[0]
+            y_world = abs(spec.center_xy_m[1] + y) + lay.placement.xy_m[1]
+            assert np.hypot(x - BASE_X_M, y_world) < REACH_M
+            assert z > 0
+
+
+def test_spec_layout_and_expert_config_validate() -> None:
+    with pytest.raises(ValueError, match="apart"):
+        DrawerCabinetSpec(name="c", center_xy_m=(0, 0), front_color=(1, 0, 0, 1), handle_y_m=(0, 0))
+    with pytest.raises(ValueError, match="beyond the drawer front"):
+        DrawerCabinetSpec(
+            name="c", center_xy_m=(0, 0), front_color=(1, 0, 0, 1), handle_y_m=(0.12, -0.07)
+        )
+    with pytest.raises(ValueError, match="close_start_m"):
+        DrawerLayout(close_start_m=(0.05, 0.10))
+    with pytest.raises(ValueError, match="close_success_m"):
+        DrawerLayout(close_success_m=0.0)
+    with pytest.raises(ValueError, match="lead_m"):
+        DrawerExpertConfig(lead_m=0.0)
+
+
+# ---------------------------------------------------------------------------- slow (simulation)
+
+
+@pytest.fixture(scope="module")
+def env():
+    import awda_bench.envs  # noqa: F401
+
+    e = gym.make("AWDA-Drawer-v1", obs_mode="state", reward_mode="none", num_envs=1)
+    yield e
+    e.close()
+
+
+def _scene_state(env) -> np.ndarray:
+    base = env.unwrapped
+    poses = torch.cat([c.pose.raw_pose for c in base.cabinets], dim=1)
+    return torch.cat([poses, base.drawer_slides()], dim=1).cpu().numpy()
+
+
+@pytest.mark.slow
+def test_make_reset_step_and_initial_slides(env) -> None:
+    base = env.unwrapped
+    assert base.robot_uids == "panda_awda" and base.family == "drawer"
+    assert base.num_variations == 8 and not base.has_grasp_target
+    obs, info = env.reset(seed=0, options={"task": 6})
+    assert torch.isfinite(obs).all()
+    assert int(info["task"][0]) == 6 and not bool(info["success"][0])
+    assert int(base.target_drawer[0]) == 3 and bool(base.wants_open[0])
+    np.testing.assert_allclose(base.drawer_slides().cpu().numpy(), 0.0, atol=1e-6)
+    obs, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+    assert torch.isfinite(obs).all()
+    assert set(info) >= {"success", "success_once", "drawer_slide_m", "task"}
+    lo, hi = base.layout.close_start_m
+    for seed in range(4):  # close: the target and one drawer of the other cabinet start out
+        env.reset(seed=seed, options={"task": 3})  # cabinet 0, upper drawer
+        slides = base.drawer_slides()[0].cpu().numpy()
+        assert lo - 1e-6 <= slides[1] <= hi + 1e-6 and slides[0] == pytest.approx(0, abs=1e-6)
+        assert int((slides[2:] > 1e-3).sum()) == 1
+
+
+@pytest.mark.slow
+def test_same_seed_same_layout_different_seed_different_layout(env) -> None:
+    env.reset(seed=7, options={"task": 5})
+    first = _scene_state(env)
+    env.reset(seed=8, options={"task": 5})
+    other = _scene_state(env)
+    env.reset(seed=7, options={"task": 5})
+    np.testing.assert_array_equal(first, _scene_state(env))
+    assert np.abs(first - other).max() > 1e-3
+
+
+@pytest.mark.slow
+def test_handle_position_follows_the_drawer_link(env) -> None:
+    base = env.unwrapped
+    for task in range(0, 8, 2):
+        env.reset(seed=task, options={"task": task})
+        drawer = int(base.target_drawer[0])
+        cabinet = base.cabinets[drawer // 2]
+        slides = torch.zeros((1, 2))
+        slides[0, drawer % 2] = 0.1
+        cabinet.set_qpos(slides)
+        spec = base.target_spec(0)
+        link = base.drawer_links[drawer]
+        yaw = 2 * torch.atan2(link.pose.q[:, 3], link.pose.q[:, 0])
+        local = torch.tensor([[spec.handle_center_x_m, spec.handle_y_m[drawer % 2], 0.0]])
+        np.testing.assert_allclose(
+            base.handle_position().numpy(), (link.pose.p + rotate_z(local, yaw)).numpy(), atol=1e-5
+        )
+        # the slide axis points from the shut handle to the pulled one
+        shut = base.handle_position(torch.zeros(1))
+        moved = base.handle_position() - shut
+        np.testing.assert_allclose(moved.numpy(), (0.1 * base.slide_axis()).numpy(), atol=1e-5)
+        assert float(base.slide_axis()[0, 0]) < -0.99  # toward the robot
+
+
+@pytest.mark.slow
+def test_success_thresholds_and_drawer_stays_where_left(env) -> None:
+    base = env.unwrapped
+    lay = base.layout
+    env.reset(seed=0, options={"task": 2})  # open cabinet 0 upper drawer
+    base.cabinets[0].set_qpos(torch.tensor([[0.0, lay.open_success_m - 0.01]]))
+    assert not bool(base.evaluate()["success"][0])
+    base.cabinets[0].set_qpos(torch.tensor([[0.0, lay.open_success_m + 0.01]]))
+    assert bool(base.evaluate()["success"][0])
+    for _ in range(10):  # passive, damped slide: no drift
+        env.step(np.zeros(4, dtype=np.float32))
+    assert float(base.target_slide()[0]) == pytest.approx(lay.open_success_m + 0.01, abs=0.003)
+    env.reset(seed=0, options={"task": 5})  # close cabinet 1 lower drawer
+    assert not bool(base.evaluate()["success"][0])
+    base.cabinets[1].set_qpos(torch.tensor([[lay.close_success_m - 0.002, 0.0]]))
+    assert bool(base.evaluate()["success"][0])
+    base.cabinets[1].set_qpos(torch.tensor([[lay.close_success_m + 0.004, 0.0]]))
+    assert not bool(base.evaluate()["success"][0])
+
+
+@pytest.mark.slow
+def test_state_dict_round_trip_restores_drawers_and_task(env) -> None:
+    base = env.unwrapped
+    env.reset(seed=4, options={"task": 7})
+    state = base.get_state_dict()
+    before = _scene_state(env)
+    qpos = base.agent.robot.get_qpos().clone()
+    for _ in range(5):
+        env.step(np.array([1.0, -1.0, -1.0, 1.0], dtype=np.float32))
+    env.reset(seed=5, options={"task": 0})
+    base.set_state_dict(state)
+    np.testing.assert_allclose(_scene_state(env), before, atol=1e-6)
+    torch.testing.assert_close(base.agent.robot.get_qpos(), qpos)
+    assert int(base.task[0]) == 7
+
+
+@pytest.mark.slow
+def test_nan_action_is_rejected(env) -> None:
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match="NaN"):
+        env.step(np.array([0.0, np.nan, 0.0, 0.0], dtype=np.float32))
+
+
+@pytest.mark.slow
+def test_bad_variation_is_a_usage_error(env) -> None:
+    with pytest.raises(UsageError, match="0..7"):
+        env.reset(seed=0, options={"task": 8})
+
+
+def _run_expert(env, task: int, seed: int, horizon: int = 200) -> tuple[bool, set[str]]:
+    """Run the expert; returns (success at the end, the truth signals seen true at some step)."""
+    base = env.unwrapped
+    obs, _ = env.reset(seed=seed, options={"task": task})
+    expert = DrawerExpert()
+    spec = EpisodeSpec(suite="mosaic", task=task, episode=0, seed=seed, demo_seed=seed + 1)
+    expert.reset(EpisodeContext(env=base, spec=spec))
+    seen: set[str] = set()
+    info: dict = {}
+    for _ in range(horizon):
+        obs, _, _, _, info = env.step(expert.act(obs))
+        seen |= {k for k, v in base.truth_signals().items() if bool(v[0])}
+        if expert.done:
+            break
+    assert expert.done, f"expert did not finish within {horizon} steps"
+    return bool(info["success"][0]), seen
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("task", "seed"), [(2, 0), (7, 1)])
+def test_expert_succeeds_on_the_agent(env, task: int, seed: int) -> None:
+    success, seen = _run_expert(env, task, seed)
+    assert success
+    assert ("grasp" if task % 2 == 0 else "press") in seen
+
+
+@pytest.mark.slow
+def test_expert_succeeds_on_the_demonstrator() -> None:
+    import awda_bench.envs  # noqa: F401
+
+    e = gym.make(
+        "AWDA-Drawer-v1", robot_uids="awda_demonstrator", obs_mode="state", reward_mode="none"
+    )
+    try:
+        assert _run_expert(e, 4, 3)[0]
+        assert _run_expert(e, 1, 4)[0]
+    finally:
+        e.close()
