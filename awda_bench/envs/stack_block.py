@@ -191,11 +191,13 @@ class StackBlockEnv(AWDATaskEnv):
 
     def target_distance(self) -> torch.Tensor:
         """(n,) TCP distance to cube A's surface [m]."""
-        raw = self._per_env_cube(self.cube_a, lambda c: c.pose.raw_pose)
+        return self._distance_to(self._per_env_cube(self.cube_a, lambda c: c.pose.raw_pose))
+
+    def _distance_to(self, raw_pose: torch.Tensor) -> torch.Tensor:
+        """(n,) TCP distance to the surface of the cubes at ``raw_pose`` (n, 7) [m]."""
+        pos, quat = raw_pose[:, None, :3], raw_pose[:, None, 3:]
         spec = self.cube_specs[:1]  # the three cubes share one geometry
-        return distance_to_objects(self.agent.tcp_pose.p, raw[:, None, :3], raw[:, None, 3:], spec)[
-            :, 0
-        ]
+        return distance_to_objects(self.agent.tcp_pose.p, pos, quat, spec)[:, 0]
 
     def is_grasping_target(self) -> torch.Tensor:
         """(n,) simulator truth: the fingers hold cube A (the agent's contact-force test)."""
@@ -206,7 +208,8 @@ class StackBlockEnv(AWDATaskEnv):
 
     def _evaluate_task(self) -> dict[str, torch.Tensor]:
         lay = self.layout
-        a_pos = self.target_position()
+        a_raw = self._per_env_cube(self.cube_a, lambda c: c.pose.raw_pose)
+        a_pos = a_raw[:, :3]
         b_pos, b_quat = self.base_pose()
         # A's centre in B's frame (B's yaw only: a resting cube is upright)
         yaw = 2 * torch.atan2(b_quat[:, 3], b_quat[:, 0])
@@ -224,6 +227,8 @@ class StackBlockEnv(AWDATaskEnv):
             "success": on_footprint & touching & resting & ~grasped,
             "is_grasped": grasped,
             "a_on_b_gap_m": gap,
+            "target_pos": a_pos,
+            "target_distance_m": self._distance_to(a_raw),
         }
 
     def _get_obs_extra(self, info: dict) -> dict:
