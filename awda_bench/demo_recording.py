@@ -36,7 +36,9 @@ SETTLE_STEPS = 5
 """Control steps recorded after the expert is done (the released object comes to rest)."""
 
 
-def make_demo_env(suite: Suite | str, embodiment: str = "demonstrator", env_id: str | None = None) -> Any:
+def make_demo_env(
+    suite: Suite | str, embodiment: str = "demonstrator", env_id: str | None = None
+) -> Any:
     """One of the suite's envs (default its main ``env_id``) with ``embodiment``'s robot (state
     observations, no reward, one env).
 
@@ -64,7 +66,9 @@ def make_demo_env(suite: Suite | str, embodiment: str = "demonstrator", env_id: 
     )
 
 
-def demo_env_for(cache: dict[tuple[str, str], Any], suite: Suite, task: int, embodiment: str) -> Any:
+def demo_env_for(
+    cache: dict[tuple[str, str], Any], suite: Suite, task: int, embodiment: str
+) -> Any:
     """The env serving suite task ``task`` for ``embodiment``, built once per (env id, embodiment)
     and kept in ``cache``."""
     key = (suite.env_id_for(task), embodiment)
@@ -107,7 +111,9 @@ def record_demo(
     if base.robot_uids != EMBODIMENT_UIDS.get(embodiment):
         raise UsageError(f"env has robot {base.robot_uids!r}, not the {embodiment!r} embodiment")
     if env.spec is not None and env.spec.id != env_id:
-        raise UsageError(f"task {task} of suite {suite.name!r} runs in {env_id}, not in {env.spec.id}")
+        raise UsageError(
+            f"task {task} of suite {suite.name!r} runs in {env_id}, not in {env.spec.id}"
+        )
     expert = make_expert(suite.name, embodiment)
     obs, info = env.reset(seed=seed, options={"task": suite.task(task).reset_task})
     spec = EpisodeSpec(suite=suite.name, task=task, episode=0, seed=seed, demo_seed=seed)
@@ -161,6 +167,27 @@ def record_demo(
         },
     )
     return (np.stack(images) if frames else None), trajectory
+
+
+DEMO_FRAMES = 10
+"""Frames of a demonstration video a one-shot policy watches (first and last included; SPEC §6)."""
+
+
+def demo_video_frames(
+    suite: Suite,
+    task: int,
+    demo_seed: int,
+    envs: dict[tuple[str, str], Any],
+    count: int = DEMO_FRAMES,
+    render_every: int = 4,
+) -> np.ndarray:
+    """The demonstrator's video of ``(task, demo_seed)`` subsampled to ``count`` frames
+    ``(count, H, W, 3)`` uint8, first and last included. ``envs`` caches the demo envs."""
+    env = demo_env_for(envs, suite, task, "demonstrator")
+    frames, _ = record_demo(suite, task, demo_seed, render_every=render_every, env=env)
+    assert frames is not None
+    index = np.linspace(0, len(frames) - 1, min(count, len(frames))).round().astype(int)
+    return frames[index]
 
 
 def save_video(frames: np.ndarray, path: str | Path, fps: float) -> Path:

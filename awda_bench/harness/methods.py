@@ -168,6 +168,12 @@ for _spec in (
         description="privileged: scripted expert",
     ),
     MethodSpec(
+        "awda",
+        "awda_bench.policies.awda_policy:AWDAPolicy",
+        learned=True,
+        description="learned: AWDA waypoint network snapshots (--checkpoints DIR) + motor primitives",
+    ),
+    MethodSpec(
         "random",
         "awda_bench.policies.random_policy:RandomPolicy",
         description="uniform random actions (a floor for every table)",

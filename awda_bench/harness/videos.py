@@ -50,9 +50,6 @@ def grab_frame(env: Any) -> tuple[np.ndarray, dict[str, np.ndarray] | None]:
     return (frame[0] if frame.ndim == 4 else frame).astype(np.uint8), None
 
 
-DEMO_FRAMES = 10
-"""Demo frames shown in a Fig. S5 image (first and last included), as the method sees them."""
-
 DEFAULT_DEMO_SOURCE = "awda_bench.harness.videos:record_demo_frames"
 """``"module:attribute"`` of ``f(suite, task, demo_seed, cache) -> list of RGB frames``."""
 
@@ -60,18 +57,14 @@ DEFAULT_DEMO_SOURCE = "awda_bench.harness.videos:record_demo_frames"
 def record_demo_frames(
     suite: Suite, task: int, demo_seed: int, cache: dict[str, Any]
 ) -> list[np.ndarray]:
-    """The demonstrator's video of ``(task, demo_seed)``, subsampled to :data:`DEMO_FRAMES` frames.
+    """The demonstrator's video of ``(task, demo_seed)``, subsampled to :data:`awda_bench.demo_recording.DEMO_FRAMES`
+    frames (first and last included), as the method sees them.
 
-    The demo envs are built once per ``cache`` (one per env id) (its first camera capture costs seconds).
+    The demo envs are built once per ``cache`` (one per env id).
     """
-    from awda_bench.demo_recording import demo_env_for, record_demo
+    from awda_bench.demo_recording import demo_video_frames
 
-    envs = cache.setdefault("demo_envs", {})
-    env = demo_env_for(envs, suite, task, "demonstrator")
-    frames, _ = record_demo(suite, task, demo_seed, render_every=4, env=env)
-    assert frames is not None
-    index = np.linspace(0, len(frames) - 1, min(DEMO_FRAMES, len(frames))).round().astype(int)
-    return [frames[i] for i in index]
+    return list(demo_video_frames(suite, task, demo_seed, cache.setdefault("demo_envs", {})))
 
 
 def choose_episodes(rows: list[tuple[int, int, int]], k: int) -> list[tuple[int, int, bool]]:

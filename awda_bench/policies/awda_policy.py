@@ -1,0 +1,133 @@
+"""``awda``: a learned waypoint network (one snapshot file) driving the motor primitives.
+
+Per episode (SPEC §6, S1)::
+
+    demo video (demonstrator, other layout) --10 frames--+
+                                                        +--> AwdaNet --> 5 attributed waypoints
+    agent's first third-person frame --------------------+                  |
+                                                        WaypointExecutor (free space, grasp with
+                                                        wrist depth, carry, drop) --> 4-D actions
+
+The network sees only images: the demo frames and the agent's first frame, resized with OpenCV to
+the snapshot's configured input size. Predicted attribute probabilities are thresholded at
+``attribute_threshold`` into the flags the executor acts on.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from awda_bench.errors import CorruptFileError
+from awda_bench.policies.base import EpisodeContext
+from awda_bench.policies.gt_waypoints import robot_states
+from awda_bench.primitives.config import ExecutorConfig, LocalizationConfig
+from awda_bench.primitives.executor import WaypointExecutor
+from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION, WristLocator
+
+
+@dataclass(frozen=True)
+class AWDAPolicyConfig:
+    """Settings of the ``awda`` method around the network."""
+
+    attribute_threshold: float = 0.5
+    """A predicted attribute probability above this is a set flag."""
+    head: str = "task"
+    """Waypoint head used at evaluation (``task``; ``synthesized`` is for trajectory synthesis)."""
+    executor: ExecutorConfig = field(default_factory=ExecutorConfig)
+    """Primitive and execution parameters (as for ``gt-waypoints``)."""
+    localization: LocalizationConfig = WRIST_LOCALIZATION
+    """Wrist-depth localization in the grasp primitive."""
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.attribute_threshold < 1.0:
+            raise ValueError(
+                f"AWDAPolicyConfig.attribute_threshold must be in (0, 1), got {self.attribute_threshold}"
+            )
+
+
+def _resize(frames: np.ndarray, height: int, width: int) -> np.ndarray:
+    import cv2
+
+    if frames.shape[-3:-1] == (height, width):
+        return frames
+    return np.stack([cv2.resize(f, (width, height), interpolation=cv2.INTER_AREA) for f in frames])
+
+
+class AWDAPolicy:
+    """Predicts waypoints once per episode from images, then executes them."""
+
+    name = "awda"
+
+    def __init__(self, snapshot: str | Path, config: AWDAPolicyConfig | None = None) -> None:
+        import torch
+
+        from awda_bench.models.snapshot import load_snapshot
+
+        self.config = config or AWDAPolicyConfig()
+        loaded = load_snapshot(Path(snapshot))
+        if loaded.arch != "awda":
+            raise CorruptFileError(
+                f"snapshot {snapshot} holds a {loaded.arch!r} model, not 'awda'; pick an AWDA checkpoint directory"
+            )
+        self.device = "cuda" if torch.cuda.is_available() else "cpu"
+        self.model = loaded.build_model(self.device)
+        trunk = self.model.config.trunk
+        self.image_size = (trunk.image_height_px, trunk.image_width_px)
+        self.demo_frames = trunk.demo_frames
+        self._demo_envs: dict[tuple[str, str], Any] = {}
+        self._env: Any = None
+        self._executor: WaypointExecutor | None = None
+        self._waypoints: np.ndarray | None = None
+        self.predict_s = 0.0
+        """Wall time of the last forward pass [s]."""
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        from awda_bench.demo_recording import demo_video_frames
+        from awda_bench.models.predict import predict_waypoints
+        from awda_bench.robot.cameras import capture_rgb
+        from awda_bench.suites import load_suite
+
+        self._env = ctx.env
+        suite = load_suite(ctx.spec.suite)
+        demo = ctx.extras.get("demo_frames")
+        if demo is None:
+            demo = demo_video_frames(
+                suite, ctx.spec.task, ctx.spec.demo_seed, self._demo_envs, self.demo_frames
+            )
+            ctx.extras["demo_frames"] = list(demo)
+        first = capture_rgb(ctx.env)[0]
+        ctx.extras.setdefault("first_frame", first)
+        h, w = self.image_size
+        start = time.perf_counter()
+        predicted = predict_waypoints(
+            self.model,
+            _resize(np.asarray(demo), h, w),
+            _resize(first[None], h, w)[0],
+            head=self.config.head,
+        )
+        self.predict_s = time.perf_counter() - start
+        waypoints = predicted.copy()
+        waypoints[:, 3:] = (predicted[:, 3:] > self.config.attribute_threshold).astype(np.float64)
+        self._waypoints = waypoints
+        locator = WristLocator(ctx.env, env_index=0, config=self.config.localization)
+        self._executor = WaypointExecutor(waypoints, locator, self.config.executor)
+
+    def act(self, obs: Any) -> np.ndarray:
+        if self._executor is None:
+            raise RuntimeError("AWDAPolicy.act() before reset(ctx)")
+        state = robot_states(self._env)[0]
+        return self._executor.step(state)[None].astype(np.float32)
+
+    @property
+    def done(self) -> bool:
+        return self._executor is not None and self._executor.done
+
+    @property
+    def waypoints(self) -> np.ndarray | None:
+        """The (5, 3 + k) waypoints acted on (attributes thresholded)."""
+        return self._waypoints
