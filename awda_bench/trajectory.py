@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -52,13 +53,14 @@ class Trajectory:
         """Write an ``.npz`` file (arrays plus ``meta`` as a JSON string)."""
         import json
 
-        arrays = {
+        arrays: dict[str, Any] = {
+            "meta": json.dumps(self.meta, default=str),
             "tcp_pos": self.tcp_pos,
             "gripper_opening_m": self.gripper_opening_m,
             "actions": self.actions,
             **{f"truth__{k}": v for k, v in self.truth.items()},
         }
-        np.savez_compressed(path, meta=json.dumps(self.meta, default=str), **arrays)
+        np.savez_compressed(path, **arrays)
 
     @classmethod
     def load(cls, path: str | Path) -> Trajectory:

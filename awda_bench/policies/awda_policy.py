@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from awda_bench.errors import CorruptFileError
+from awda_bench.models.awda_net import AwdaNet
 from awda_bench.policies.base import EpisodeContext
 from awda_bench.policies.gt_waypoints import robot_states
 from awda_bench.primitives.config import ExecutorConfig, LocalizationConfig
@@ -75,8 +76,11 @@ class AWDAPolicy:
                 f"snapshot {snapshot} holds a {loaded.arch!r} model, not 'awda'; pick an AWDA checkpoint directory"
             )
         self.device = "cuda" if torch.cuda.is_available() else "cpu"
-        self.model = loaded.build_model(self.device)
-        trunk = self.model.config.trunk
+        model = loaded.build_model(self.device)
+        if not isinstance(model, AwdaNet):
+            raise CorruptFileError(f"snapshot {snapshot} did not build an AwdaNet")
+        self.model: AwdaNet = model
+        trunk = model.config.trunk
         self.image_size = (trunk.image_height_px, trunk.image_width_px)
         self.demo_frames = trunk.demo_frames
         self._demo_envs: dict[tuple[str, str], Any] = {}

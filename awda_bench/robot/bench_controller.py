@@ -65,7 +65,7 @@ def _bench_scene(env_id: str, steps: int, rounds: int) -> None:
     for _round in range(rounds):
         for mode, env in envs.items():
             env.reset(seed=0)
-            agent = env.unwrapped.agent
+            agent = env.unwrapped.agent  # type: ignore[attr-defined]
             if mode == "pd_joint_pos":
                 if not joint_targets:
                     raise RuntimeError("joint targets are recorded from the mink run, which must come first")
@@ -86,8 +86,8 @@ def _bench_scene(env_id: str, steps: int, rounds: int) -> None:
     print(f"controller benchmark: {env_id}, state obs, CPU sim, {rounds} rounds x {steps} steps")
     print(f"{'control mode':<24}{'steps/s (median)':>18}{'rounds':>28}{'mink / this':>14}")
     for mode in MODES:
-        rounds = ", ".join(f"{r:.0f}" for r in rates[mode])
-        print(f"{mode:<24}{median[mode]:>18.1f}{rounds:>28}{ours / median[mode]:>14.2f}")
+        per_round = ", ".join(f"{r:.0f}" for r in rates[mode])
+        print(f"{mode:<24}{median[mode]:>18.1f}{per_round:>28}{ours / median[mode]:>14.2f}")
     print(
         f"mink vs ManiSkill pd_ee_delta_pos: {ours / median['pd_ee_delta_pos']:.2f}x (goal >= 1.3); "
         f"mink vs pd_joint_pos: {ours / median['pd_joint_pos']:.2f}x (goal >= 0.85)"

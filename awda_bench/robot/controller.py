@@ -149,6 +149,7 @@ class BinaryGripperController(PDJointPosMimicController):
         self._apply(closed)
 
     def get_state(self) -> dict:
+        assert self._closed is not None, "reset() sets the command"
         return {"closed": self._closed.clone()}
 
     def set_state(self, state: dict) -> None:
@@ -157,7 +158,7 @@ class BinaryGripperController(PDJointPosMimicController):
 
     def set_action(self, action: torch.Tensor) -> None:
         closed = action[:, :1] > 0
-        if torch.equal(closed, self._closed):
+        if self._closed is not None and torch.equal(closed, self._closed):
             return
         self._apply(closed)
 
