@@ -68,7 +68,9 @@ def probe_render_device() -> RenderDevice:
     names = re.findall(r"GPU:\s*(.+)", summary)
     name = names[0].strip() if names else summary.strip().splitlines()[0]
     software = any(word in name.lower() for word in ("llvmpipe", "lavapipe", "swiftshader"))
-    return RenderDevice(name=name, software=software, mesa_version=_mesa_version() if software else None)
+    return RenderDevice(
+        name=name, software=software, mesa_version=_mesa_version() if software else None
+    )
 
 
 def render_backend() -> str:

@@ -111,7 +111,9 @@ class Suite:
         for t in self.tasks:
             if t.index == index:
                 return t
-        raise UnknownChoiceError(f"task of suite {self.name!r}", index, [t.index for t in self.tasks])
+        raise UnknownChoiceError(
+            f"task of suite {self.name!r}", index, [t.index for t in self.tasks]
+        )
 
     @property
     def train_tasks(self) -> tuple[TaskDef, ...]:
@@ -135,7 +137,9 @@ def load_suite(name: str, directory: Path = SUITES_DIR) -> Suite:
     try:
         raw = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
-        raise CorruptFileError(f"suite file {path} is not valid TOML ({exc}); fix or restore it") from exc
+        raise CorruptFileError(
+            f"suite file {path} is not valid TOML ({exc}); fix or restore it"
+        ) from exc
     try:
         tasks = tuple(
             TaskDef(
@@ -161,13 +165,19 @@ def load_suite(name: str, directory: Path = SUITES_DIR) -> Suite:
             episode_unit=str(raw.get("episode_unit", "task")),
         )
     except (KeyError, TypeError, ValueError) as exc:
-        raise CorruptFileError(f"suite file {path} is missing or mistypes a field ({exc!r})") from exc
+        raise CorruptFileError(
+            f"suite file {path} is missing or mistypes a field ({exc!r})"
+        ) from exc
     indices = [t.index for t in suite.tasks]
     if len(set(indices)) != len(indices):
         raise CorruptFileError(f"suite file {path} repeats a task index")
     for i in suite.held_out:
         if i not in indices:
-            raise UsageError(f"suite file {path}: held-out task {i} is not among its tasks {indices}")
+            raise UsageError(
+                f"suite file {path}: held-out task {i} is not among its tasks {indices}"
+            )
     if suite.name != name:
-        raise CorruptFileError(f"suite file {path} declares name {suite.name!r}; rename one of them")
+        raise CorruptFileError(
+            f"suite file {path} declares name {suite.name!r}; rename one of them"
+        )
     return suite

@@ -39,7 +39,9 @@ class Trajectory:
         if self.tcp_pos.shape != (T, 3):
             raise ValueError(f"tcp_pos must be ({T}, 3), got {self.tcp_pos.shape}")
         if self.gripper_opening_m.shape != (T,):
-            raise ValueError(f"gripper_opening_m must be ({T},), got {self.gripper_opening_m.shape}")
+            raise ValueError(
+                f"gripper_opening_m must be ({T},), got {self.gripper_opening_m.shape}"
+            )
         if self.actions.shape != (T, 4):
             raise ValueError(f"actions must be ({T}, 4), got {self.actions.shape}")
         for name, values in self.truth.items():
@@ -70,7 +72,9 @@ class Trajectory:
 
         try:
             with np.load(path, allow_pickle=False) as data:
-                truth = {k[len("truth__") :]: data[k] for k in data.files if k.startswith("truth__")}
+                truth = {
+                    k[len("truth__") :]: data[k] for k in data.files if k.startswith("truth__")
+                }
                 return cls(
                     tcp_pos=data["tcp_pos"],
                     gripper_opening_m=data["gripper_opening_m"],
@@ -79,4 +83,6 @@ class Trajectory:
                     meta=json.loads(str(data["meta"])),
                 )
         except (OSError, KeyError, ValueError, zipfile.BadZipFile) as exc:
-            raise CorruptFileError(f"{path} is not a trajectory file written by awda_bench ({exc})") from exc
+            raise CorruptFileError(
+                f"{path} is not a trajectory file written by awda_bench ({exc})"
+            ) from exc

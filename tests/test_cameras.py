@@ -35,7 +35,9 @@ def test_wrist_depth_back_projects_onto_the_table_below_the_tcp(env) -> None:
     assert K[1, 1] == pytest.approx(72 / 2, rel=1e-3)
     v, u = 36, 48
     z = depth[v, u]
-    point = cam2world @ np.array([(u + 0.5 - K[0, 2]) * z / K[0, 0], (v + 0.5 - K[1, 2]) * z / K[1, 1], z, 1.0])
+    point = cam2world @ np.array(
+        [(u + 0.5 - K[0, 2]) * z / K[0, 0], (v + 0.5 - K[1, 2]) * z / K[1, 1], z, 1.0]
+    )
     tcp = env.unwrapped.agent.tcp.pose.p[0].cpu().numpy()
     assert point[2] == pytest.approx(0.0, abs=0.01)  # the table top
     assert point[:2] == pytest.approx(tcp[:2], abs=0.02)  # straight below the TCP
@@ -61,7 +63,11 @@ def test_stepping_does_not_render(env) -> None:
     before = counter.frames if counter else 0
     for _ in range(5):
         env.step(np.zeros(4))
-    after = env.unwrapped.capture_counter.frames if getattr(env.unwrapped, "capture_counter", None) else 0
+    after = (
+        env.unwrapped.capture_counter.frames
+        if getattr(env.unwrapped, "capture_counter", None)
+        else 0
+    )
     assert after == before
 
 

@@ -32,7 +32,9 @@ def test_doctor_reports_the_device_and_writes_a_frame(tmp_path: Path) -> None:
     assert frame.is_file() and frame.stat().st_size > 1000
 
 
-@pytest.mark.parametrize("command", [["doctor"], ["bench", "controller", "--steps", "5", "--rounds", "1"]])
+@pytest.mark.parametrize(
+    "command", [["doctor"], ["bench", "controller", "--steps", "5", "--rounds", "1"]]
+)
 def test_without_a_renderer_commands_fail_in_one_line(tmp_path: Path, command: list[str]) -> None:
     result = _run(command, VK_ICD_FILENAMES=str(tmp_path / "no_such_icd.json"))
     assert result.returncode == 3

@@ -20,11 +20,31 @@ from awda_bench.render_device import require_renderer
 
 BENCHMARKS: dict[str, tuple[str, str, str, bool]] = {
     # name: (module, add-args function, run function, needs the renderer)
-    "controller": ("awda_bench.robot.bench_controller", "add_controller_args", "run_controller_bench", True),
+    "controller": (
+        "awda_bench.robot.bench_controller",
+        "add_controller_args",
+        "run_controller_bench",
+        True,
+    ),
     "env": ("awda_bench.envs.bench_env", "add_env_args", "run_env_bench", True),
-    "primitives": ("awda_bench.primitives.bench_primitives", "add_primitives_args", "run_primitives_bench", True),
-    "harness": ("awda_bench.harness.bench_throughput", "add_harness_args", "run_harness_bench", True),
-    "inference": ("awda_bench.models.bench_inference", "add_inference_args", "run_inference_bench", False),
+    "primitives": (
+        "awda_bench.primitives.bench_primitives",
+        "add_primitives_args",
+        "run_primitives_bench",
+        True,
+    ),
+    "harness": (
+        "awda_bench.harness.bench_throughput",
+        "add_harness_args",
+        "run_harness_bench",
+        True,
+    ),
+    "inference": (
+        "awda_bench.models.bench_inference",
+        "add_inference_args",
+        "run_inference_bench",
+        False,
+    ),
 }
 
 

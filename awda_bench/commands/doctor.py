@@ -55,19 +55,25 @@ def run(args: argparse.Namespace) -> int:
 
     import torch
 
-    backend = "physx_cuda (CUDA available)" if torch.cuda.is_available() else "physx_cpu (no CUDA device)"
+    backend = (
+        "physx_cuda (CUDA available)" if torch.cuda.is_available() else "physx_cpu (no CUDA device)"
+    )
     print(f"sim backend   {backend}")
     device = require_renderer()
     print(f"render device {device.label}")
 
     frame, seconds = render_test_frame()
     if float(frame.std()) < 1.0:
-        raise AwdaError(f"the test frame rendered blank (std {frame.std():.2f}); the renderer is broken")
+        raise AwdaError(
+            f"the test frame rendered blank (std {frame.std():.2f}); the renderer is broken"
+        )
     import cv2
 
     args.frame.parent.mkdir(parents=True, exist_ok=True)
     cv2.imwrite(str(args.frame), cv2.cvtColor(frame, cv2.COLOR_RGB2BGR))
-    print(f"test frame    {args.frame} ({frame.shape[1]}x{frame.shape[0]}, first capture {seconds:.1f} s)")
+    print(
+        f"test frame    {args.frame} ({frame.shape[1]}x{frame.shape[0]}, first capture {seconds:.1f} s)"
+    )
     print("ok")
     return 0
 
@@ -77,11 +83,12 @@ def render_test_frame() -> tuple[np.ndarray, float]:
     import gymnasium as gym
 
     import awda_bench.robot  # noqa: F401  (registers panda_awda and AWDA-EmptyTable-v1)
+    from awda_bench.render_device import render_backend
     from awda_bench.robot.cameras import capture_rgb
 
-    from awda_bench.render_device import render_backend
-
-    env = gym.make("AWDA-EmptyTable-v1", obs_mode="state", reward_mode="none", render_backend=render_backend())
+    env = gym.make(
+        "AWDA-EmptyTable-v1", obs_mode="state", reward_mode="none", render_backend=render_backend()
+    )
     try:
         env.reset(seed=0)
         start = time.perf_counter()

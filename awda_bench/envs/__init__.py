@@ -5,9 +5,15 @@ Importing it also registers the robots the tasks accept: the demonstrator
 the ``panda_awda`` agent).
 """
 
-from awda_bench.envs import press_button, stack_block  # noqa: F401  (register their envs)
-from awda_bench.envs import basketball, nut_assembly  # noqa: F401  (register their envs)
-from awda_bench.envs import door, drawer  # noqa: F401  (register their envs)
+# importing a task module registers its env with gymnasium
+from awda_bench.envs import (  # noqa: F401
+    basketball,
+    door,
+    drawer,
+    nut_assembly,
+    press_button,
+    stack_block,
+)
 from awda_bench.envs.pick_place import PickPlaceEnv, PickPlaceLayout
 from awda_bench.robot import demonstrator as _demonstrator  # noqa: F401  (registers robots)
 

@@ -122,7 +122,9 @@ def run_env_bench(args: argparse.Namespace) -> int:
             per_task: list[dict[str, Any]] = []
             for seed in range(args.sweep_seeds):
                 task_env = demo_env_for(envs, suite, task, args.embodiment)
-                _, traj = record_demo(suite, task, seed, args.embodiment, frames=False, env=task_env)
+                _, traj = record_demo(
+                    suite, task, seed, args.embodiment, frames=False, env=task_env
+                )
                 m = traj.meta
                 row = {
                     k: m[k]

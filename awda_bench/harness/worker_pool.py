@@ -110,7 +110,9 @@ class EpisodeExecutor:
     def env_for(self, env_id: str) -> Any:
         """The env with id ``env_id``, built once."""
         if env_id not in self.envs:
-            self.envs[env_id] = self._make_env(self.suite, env_id=env_id, render_mode=self._render_mode)
+            self.envs[env_id] = self._make_env(
+                self.suite, env_id=env_id, render_mode=self._render_mode
+            )
         return self.envs[env_id]
 
     @property

@@ -25,7 +25,9 @@ def validate_action(action: object, num_envs: int, dim: int = ACTION_DIM) -> tor
         try:
             tensor = torch.as_tensor(np.asarray(action, dtype=np.float32))
         except (TypeError, ValueError) as exc:
-            raise ValueError(f"action must be numeric with shape ({num_envs}, {dim}): {exc}") from exc
+            raise ValueError(
+                f"action must be numeric with shape ({num_envs}, {dim}): {exc}"
+            ) from exc
     if tensor.ndim == 1 and num_envs == 1:
         tensor = tensor[None]
     if tuple(tensor.shape) != (num_envs, dim):
@@ -33,5 +35,7 @@ def validate_action(action: object, num_envs: int, dim: int = ACTION_DIM) -> tor
             f"action must have shape ({num_envs}, {dim}) (dx, dy, dz, grip per env), got {tuple(tensor.shape)}"
         )
     if not bool(torch.isfinite(tensor).all()):
-        raise ValueError("action contains NaN or inf; every entry must be a finite number in [-1, 1]")
+        raise ValueError(
+            "action contains NaN or inf; every entry must be a finite number in [-1, 1]"
+        )
     return tensor.float()

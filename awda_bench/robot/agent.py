@@ -108,7 +108,9 @@ class PandaAWDA(Panda):
         """Validate the action (shape, finite) before the controller sees it; ``ValueError`` otherwise."""
         if self.control_mode == CONTROL_MODE:
             # validate_action already refused NaN/inf, so BaseAgent's own NaN check is skipped.
-            self.controller.set_action(validate_action(action, self.scene.num_envs, ACTION_DIM).to(self.device))
+            self.controller.set_action(
+                validate_action(action, self.scene.num_envs, ACTION_DIM).to(self.device)
+            )
         else:
             super().set_action(action)
 

@@ -22,8 +22,12 @@ MODES = ("pd_ee_delta_pos_mink", "pd_ee_delta_pos", "pd_joint_pos")
 
 
 def add_controller_args(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--steps", type=int, default=300, help="env steps per round (default %(default)s)")
-    parser.add_argument("--rounds", type=int, default=3, help="interleaved rounds per mode (default %(default)s)")
+    parser.add_argument(
+        "--steps", type=int, default=300, help="env steps per round (default %(default)s)"
+    )
+    parser.add_argument(
+        "--rounds", type=int, default=3, help="interleaved rounds per mode (default %(default)s)"
+    )
     parser.add_argument(
         "--env",
         action="append",
@@ -68,15 +72,19 @@ def _bench_scene(env_id: str, steps: int, rounds: int) -> None:
             agent = env.unwrapped.agent  # type: ignore[attr-defined]
             if mode == "pd_joint_pos":
                 if not joint_targets:
-                    raise RuntimeError("joint targets are recorded from the mink run, which must come first")
-                actions = [np.concatenate([q, [0.04]]) for q in joint_targets[: steps]]
+                    raise RuntimeError(
+                        "joint targets are recorded from the mink run, which must come first"
+                    )
+                actions = [np.concatenate([q, [0.04]]) for q in joint_targets[:steps]]
             else:
                 actions = [_circle_action(t, scales[mode]) for t in range(steps)]
             start = time.perf_counter()
             for action in actions:
                 env.step(action)
                 if mode == "pd_ee_delta_pos_mink" and len(joint_targets) < steps:
-                    joint_targets.append(agent.controller.controllers["arm"]._target_qpos[0].cpu().numpy())
+                    joint_targets.append(
+                        agent.controller.controllers["arm"]._target_qpos[0].cpu().numpy()
+                    )
             rates[mode].append(steps / (time.perf_counter() - start))
     for env in envs.values():
         env.close()

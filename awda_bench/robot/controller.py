@@ -83,7 +83,9 @@ class MinkEEPosController(PDJointPosController):
             targets[i] = q_arm
             self.last_target_pos[i] = target
             self.last_ik_error[i] = error
-        self._target_qpos = torch.as_tensor(targets, dtype=self._start_qpos.dtype, device=self.device)
+        self._target_qpos = torch.as_tensor(
+            targets, dtype=self._start_qpos.dtype, device=self.device
+        )
         if self.scene.gpu_sim_enabled:
             self.set_drive_targets(self._target_qpos)
         else:
@@ -117,7 +119,9 @@ class MinkEEPosControllerConfig(PDJointPosControllerConfig):
     def __post_init__(self) -> None:
         if not self.max_step_m > 0:
             raise ValueError(f"max_step_m must be > 0, got {self.max_step_m}")
-        if any(lo >= hi for lo, hi in zip(self.workspace_low_m, self.workspace_high_m, strict=True)):
+        if any(
+            lo >= hi for lo, hi in zip(self.workspace_low_m, self.workspace_high_m, strict=True)
+        ):
             raise ValueError(
                 f"workspace_low_m {self.workspace_low_m} must be below workspace_high_m {self.workspace_high_m}"
             )

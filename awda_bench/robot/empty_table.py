@@ -7,7 +7,6 @@ modes.
 
 from __future__ import annotations
 
-
 import torch
 from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.utils.registration import register_env
@@ -65,6 +64,3 @@ class EmptyTableEnv(BaseEnv):
 
     def compute_normalized_dense_reward(self, obs, action, info) -> torch.Tensor:
         return self.compute_dense_reward(obs, action, info)
-
-
-

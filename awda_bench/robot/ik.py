@@ -21,7 +21,9 @@ import numpy as np
 
 from awda_bench.robot.panda_model import ARM_JOINTS, TCP_SITE, load_panda_model
 
-REST_QPOS = np.array([0.0, np.pi / 8, 0.0, -np.pi * 5 / 8, 0.0, np.pi * 3 / 4, np.pi / 4, 0.04, 0.04])
+REST_QPOS = np.array(
+    [0.0, np.pi / 8, 0.0, -np.pi * 5 / 8, 0.0, np.pi * 3 / 4, np.pi / 4, 0.04, 0.04]
+)
 """ManiSkill's Panda ``rest`` keyframe (arm + fingers); its TCP points straight down."""
 
 
@@ -66,7 +68,9 @@ class PandaIK:
             [self.model.jnt_qposadr[self.model.joint(name).id] for name in ARM_JOINTS]
         )
         self.configuration.update(REST_QPOS.copy())
-        self.down_rotation = self.configuration.get_transform_frame_to_world(TCP_SITE, "site").rotation()
+        self.down_rotation = self.configuration.get_transform_frame_to_world(
+            TCP_SITE, "site"
+        ).rotation()
         """TCP orientation held fixed: the rest keyframe's (gripper pointing down, fingers along y)."""
         self.frame_task = mink.FrameTask(
             frame_name=TCP_SITE,
@@ -99,7 +103,9 @@ class PandaIK:
             full = REST_QPOS.copy()
             full[self.arm_qpos_index] = qpos
             return full
-        raise ValueError(f"qpos must have shape ({self.model.nq},) or ({len(ARM_JOINTS)},), got {qpos.shape}")
+        raise ValueError(
+            f"qpos must have shape ({self.model.nq},) or ({len(ARM_JOINTS)},), got {qpos.shape}"
+        )
 
     def solve(self, qpos: np.ndarray, target_pos: np.ndarray) -> tuple[np.ndarray, float]:
         """Arm joint targets (7,) reaching ``target_pos`` (3,) [m, base frame] from ``qpos``.
@@ -135,7 +141,9 @@ class PandaIK:
 
     def _iterate(self, target_pos: np.ndarray) -> tuple[np.ndarray, float]:
         cfg = self.config
-        self.frame_task.set_target(mink.SE3.from_rotation_and_translation(self.down_rotation, target_pos))
+        self.frame_task.set_target(
+            mink.SE3.from_rotation_and_translation(self.down_rotation, target_pos)
+        )
         data = self.configuration.data
         error = float(np.linalg.norm(data.site(TCP_SITE).xpos - target_pos))
         for _ in range(cfg.max_iterations):

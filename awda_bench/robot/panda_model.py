@@ -13,7 +13,6 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import mujoco
-
 from mani_skill import PACKAGE_ASSET_DIR
 
 PANDA_URDF = Path(PACKAGE_ASSET_DIR) / "robots" / "panda" / "panda_v2.urdf"
