@@ -190,3 +190,20 @@ def test_expert_drives_the_demonstrator() -> None:
         assert steps < 250 and bool(info["success"][0])
     finally:
         e.close()
+
+
+def test_rotate_matches_mani_skill_quaternion_apply() -> None:
+    from mani_skill.utils.geometry.rotation_conversions import (
+        quaternion_apply,
+        quaternion_invert,
+    )
+
+    from awda_bench.envs.nut_assembly import rotate
+
+    torch.manual_seed(0)
+    quat = torch.nn.functional.normalize(torch.randn(8, 4), dim=1)
+    vec = torch.randn(8, 3)
+    torch.testing.assert_close(rotate(quat, vec), quaternion_apply(quat, vec))
+    torch.testing.assert_close(
+        rotate(quat, vec, inverse=True), quaternion_apply(quaternion_invert(quat), vec)
+    )
