@@ -40,6 +40,11 @@ def add_env_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--sweep-csv", type=Path, default=None, help="write one row per sweep episode here"
     )
+    parser.add_argument(
+        "--per-family",
+        action="store_true",
+        help="time the expert on the first task of every family of the suite (no rendering)",
+    )
 
 
 def _time_expert(env, suite, task: int, episodes: int) -> tuple[int, float, float]:
@@ -68,6 +73,25 @@ def _time_expert(env, suite, task: int, episodes: int) -> tuple[int, float, floa
     return steps, total, in_step
 
 
+def _bench_families(suite: Any, envs: dict[tuple[str, str], Any], args: argparse.Namespace) -> int:
+    """Env steps/s with the expert, state only, on the first task of each family."""
+    from awda_bench.demo_recording import demo_env_for
+
+    first_task: dict[str, int] = {}
+    for t in suite.tasks:
+        first_task.setdefault(t.family, t.index)
+    print(
+        f"expert env steps/s per family ({args.embodiment}, state only, {args.episodes} episodes)"
+    )
+    print(f"{'family':<14}{'task':>6}{'steps':>8}{'steps/s':>10}{'env.step alone':>16}")
+    for family, task in first_task.items():
+        env = demo_env_for(envs, suite, task, args.embodiment)
+        env.reset(seed=0, options={"task": suite.task(task).reset_task})
+        steps, total, in_step = _time_expert(env, suite, task, args.episodes)
+        print(f"{family:<14}{task:>6}{steps:>8}{steps / total:>10.1f}{steps / in_step:>16.1f}")
+    return 0
+
+
 def run_env_bench(args: argparse.Namespace) -> int:
     from awda_bench.demo_recording import THIRD_PERSON, demo_env_for, record_demo
     from awda_bench.robot.cameras import capture_rgb
@@ -75,8 +99,10 @@ def run_env_bench(args: argparse.Namespace) -> int:
 
     suite = load_suite(args.suite)
     suite.task(args.task)
-    t0 = time.perf_counter()
     envs: dict[tuple[str, str], Any] = {}
+    if args.per_family:
+        return _bench_families(suite, envs, args)
+    t0 = time.perf_counter()
     env = demo_env_for(envs, suite, args.task, args.embodiment)
     env.reset(seed=0, options={"task": suite.task(args.task).reset_task})
     print(
