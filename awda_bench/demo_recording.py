@@ -161,8 +161,9 @@ def record_demo(
             "expert_done": expert.done,
             "success": bool(info["success"][0]),
             "success_once": bool(info["success_once"][0]),
-            "reached": bool(info["reached"][0]),
-            "grasped": bool(info["grasped"][0]),
+            # tasks without a grasp target do not report the grasp analysis
+            "reached": bool(info["reached"][0]) if "reached" in info else None,
+            "grasped": bool(info["grasped"][0]) if "grasped" in info else None,
             "frame_steps": frame_steps,
         },
     )

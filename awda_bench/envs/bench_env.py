@@ -171,8 +171,8 @@ def run_env_bench(args: argparse.Namespace) -> int:
             steps_t = [r["steps"] for r in per_task]
             print(
                 f"{task:4d}  {sum(r['success'] for r in per_task):3d}/{n:<3d}  "
-                f"{sum(r['reached'] for r in per_task):3d}/{n:<3d}  "
-                f"{sum(r['grasped'] for r in per_task):3d}/{n:<3d}  "
+                f"{sum(1 for r in per_task if r['reached']):3d}/{n:<3d}  "
+                f"{sum(1 for r in per_task if r['grasped']):3d}/{n:<3d}  "
                 f"{np.mean(steps_t):10.1f}  {max(steps_t):9d}",
                 flush=True,
             )

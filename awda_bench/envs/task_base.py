@@ -219,14 +219,13 @@ class AWDATaskEnv(BaseEnv):
             lifted = target_pos[:, 2] - self.target_start_z >= self.lift_threshold_m
             self.grasped |= self.reached & lifted
         self.success_once |= result["success"]
-        return {
-            **result,
+        flags = {
             "success_once": self.success_once.clone(),
-            "reached": self.reached.clone(),
-            "grasped": self.grasped.clone(),
             "grip_attempted": self.grip_attempted.clone(),
-            "task": self.task.clone(),
         }
+        if self.has_grasp_target:  # tasks without one do not report the grasp analysis at all
+            flags.update(reached=self.reached.clone(), grasped=self.grasped.clone())
+        return {**result, **flags, "task": self.task.clone()}
 
     def _get_obs_extra(self, info: dict) -> dict:
         return dict(

@@ -176,18 +176,20 @@ def all_cells(
 
 
 def grasp_analysis(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
-    """Per (suite, method): ok episodes and reached / grasped / success rates over them.
-
-    A rate is ``None`` when the env does not report that flag for every episode.
+    """Per (suite, method): reached / grasped / success rates over the ok episodes of tasks with a
+    grasp target (those whose env reports both flags; in MOSAIC: stack block, basketball, nut
+    assembly). Where no episode reports them the rates are ``None`` and success is over all ok
+    episodes.
     """
     ok = episodes[episodes["status"] == "ok"]
     out = []
     for (suite, method), g in ok.groupby(["suite", "method"], sort=True):
-        row = {"suite": suite, "method": method, "episodes": len(g)}
+        graspable = g[g["reached"].notna() & g["grasped"].notna()]
+        rows = graspable if len(graspable) else g
+        row = {"suite": suite, "method": method, "episodes": len(rows)}
         for column in ("reached", "grasped"):
-            known = g[column].dropna()
-            row[column] = float(known.mean()) if len(known) == len(g) and len(g) else None
-        row["success"] = float(g[metric].mean())
+            row[column] = float(graspable[column].mean()) if len(graspable) else None
+        row["success"] = float(rows[metric].mean())
         out.append(row)
     return pd.DataFrame(
         out, columns=["suite", "method", "episodes", "reached", "grasped", "success"]

@@ -189,7 +189,11 @@ def write_report(
     sections.append(("per_snapshot", "Success per snapshot", snap_table))
     grasp = aggregate.grasp_analysis(episodes, metric).set_index("suite")
     sections.append(
-        ("grasp", "Grasp analysis (rates over ok episodes; – = env does not report it)", grasp)
+        (
+            "grasp",
+            "Grasp analysis (rates over ok episodes of tasks with a grasp target; – = none reports it)",
+            grasp,
+        )
     )
     sections.append(("counts", "Episode counts", counts))
     errors = episodes[episodes["status"] == "error"]
