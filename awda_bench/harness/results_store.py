@@ -161,10 +161,14 @@ class ResultsStore:
                 )
             if create:
                 self._conn.execute("PRAGMA journal_mode=WAL")
+                # WAL + NORMAL: a commit survives the process being killed (only an OS crash or
+                # power loss can drop the last commits); no fsync per episode
+                self._conn.execute("PRAGMA synchronous=NORMAL")
             return
         if not create:
             raise CorruptFileError(f"{self.path} is empty; run `python -m awda_bench run` first")
         self._conn.execute("PRAGMA journal_mode=WAL")
+        self._conn.execute("PRAGMA synchronous=NORMAL")
         with self._conn:
             self._conn.executescript(_SCHEMA)
             self._conn.execute("INSERT INTO meta VALUES ('schema_version', ?)", (SCHEMA_VERSION,))

@@ -224,6 +224,7 @@ class WorkerPool:
         self.suite = suite
         self._ctx = mp.get_context("spawn")
         self.respawns = 0
+        self._queue: deque[Job] = deque()
         self.startup_s = 0.0
         """Time from the start of :meth:`run` until every first-generation worker was ready [s]."""
 
@@ -232,16 +233,14 @@ class WorkerPool:
 
     def run(self, jobs: Sequence[Job], on_result: Callable[[EpisodeRecord], None]) -> None:
         queue = deque(jobs)
+        self._queue = queue
         t_start = time.monotonic()
         slots = [_Slot(self._ctx, self.config) for _ in range(min(self.workers, len(jobs)))]
         waiting_first = len(slots)
         try:
             while queue or any(s.job is not None for s in slots):
                 for slot in slots:
-                    if slot.ready and slot.job is None and queue:
-                        slot.job = queue.popleft()
-                        slot.since = time.monotonic()
-                        slot.conn.send(slot.job)
+                    self._dispatch(slot)
                 now = time.monotonic()
                 deadlines = [
                     s.since
@@ -297,6 +296,13 @@ class WorkerPool:
             slot.job, self._family(slot.job), message, time.monotonic() - slot.since
         )
 
+    def _dispatch(self, slot: _Slot) -> None:
+        """Send the next queued job to ``slot`` if it is ready and idle."""
+        if slot.ready and slot.job is None and self._queue:
+            slot.job = self._queue.popleft()
+            slot.since = time.monotonic()
+            slot.conn.send(slot.job)
+
     def _respawn(self, slot: _Slot) -> _Slot:
         slot.kill()
         self.respawns += 1
@@ -320,9 +326,12 @@ class WorkerPool:
         kind = message[0]
         if kind == "ready":
             slot.ready = True
+            self._dispatch(slot)
         elif kind == "result":
-            on_result(message[1])
+            # hand the worker its next job before storing this result: it plays while we write
             slot.job = None
+            self._dispatch(slot)
+            on_result(message[1])
         elif kind == "fatal":
             raise WorkerStartError(f"a worker could not build the env: {message[1]}")
         return slot
