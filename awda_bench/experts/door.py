@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from awda_bench.policies.base import EpisodeContext
+from awda_bench.experts.base import PhaseExpert, check_config, straight_line_action
 
 
 class Phase(IntEnum):
@@ -38,23 +38,6 @@ class Phase(IntEnum):
     RELEASE = 4
     RETREAT = 5
     DONE = 6
-
-
-def straight_line_action(
-    goal: np.ndarray, tcp: np.ndarray, closed: np.ndarray, env: Any
-) -> np.ndarray:
-    """(n, 4) env action stepping the TCP straight toward ``goal`` (n, 3) [m], grip ``closed`` (n,).
-
-    The whole step is scaled down when any axis would exceed the action bound (straight lines), and
-    the grip sign is converted to the loaded embodiment's.
-    """
-    emb = env.embodiment
-    action = np.zeros((len(tcp), 4), dtype=np.float32)
-    step = (goal - tcp) / emb.max_step_m
-    step /= np.maximum(np.abs(step).max(axis=1, keepdims=True), 1.0)
-    action[:, :3] = step
-    action[:, 3] = np.where(closed, 1.0, -1.0)
-    return emb.to_env_action(action)
 
 
 @dataclass(frozen=True)
@@ -102,40 +85,41 @@ class DoorExpertConfig:
     """Most control steps any moving phase may take."""
 
     def __post_init__(self) -> None:
-        for name in (
-            "open_target_rad",
-            "lead_rad",
-            "hover_clearance_m",
-            "grasp_depth_m",
-            "push_depth_m",
-            "push_along_m",
-            "retreat_m",
-            "xy_tolerance_m",
-            "z_tolerance_m",
-            "angle_tolerance_rad",
-        ):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        for name in ("close_steps", "release_steps", "phase_budget_steps"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        check_config(
+            self,
+            positive=(
+                "open_target_rad",
+                "lead_rad",
+                "hover_clearance_m",
+                "grasp_depth_m",
+                "push_depth_m",
+                "push_along_m",
+                "retreat_m",
+                "xy_tolerance_m",
+                "z_tolerance_m",
+                "angle_tolerance_rad",
+            ),
+            at_least_one=(
+                "close_steps",
+                "release_steps",
+                "phase_budget_steps",
+            ),
+        )
 
 
 _GRIP_CLOSED_OPENING = {Phase.CLOSE, Phase.SWING}
 """Phases with the gripper closed when opening (closing keeps it closed until RETREAT)."""
 
 
-class DoorExpert:
+class DoorExpert(PhaseExpert):
     """Scripted expert of the ``door`` family (``AWDA-Door-v1``); batched over envs."""
 
+    config: DoorExpertConfig
+    start_phase = Phase.HOVER
+    done_phase = Phase.DONE
+
     def __init__(self, config: DoorExpertConfig | None = None, name: str = "scripted") -> None:
-        self.config = config or DoorExpertConfig()
-        self.name = name
-        self._env: Any = None
-        self.phase = np.zeros(0, dtype=np.int64)
-        """(n,) current :class:`Phase` per env."""
-        self.phase_steps = np.zeros(0, dtype=np.int64)
-        """(n,) control steps spent in the current phase."""
+        super().__init__(config or DoorExpertConfig(), name)
         self.pull = np.zeros(0, dtype=bool)
         """(n,) True: open by grasping the handle; False: close by pushing the panel."""
         self._retreat_z = np.zeros(0)
@@ -143,22 +127,10 @@ class DoorExpert:
         """(n, 3) TCP minus handle top when the grip closed [m]."""
 
     # ------------------------------------------------------------------ Policy protocol
-    def reset(self, ctx: EpisodeContext) -> None:
-        self._env = ctx.env
-        n = self._env.num_envs
-        self.phase = np.full(n, int(Phase.HOVER), dtype=np.int64)
-        self.phase_steps = np.zeros(n, dtype=np.int64)
+    def _reset_state(self, n: int) -> None:
         self.pull = self._env.wants_open.cpu().numpy().astype(bool)
         self._retreat_z = np.zeros(n)
         self._grip_offset = np.zeros((n, 3))
-
-    @property
-    def done(self) -> bool:
-        return bool(len(self.phase)) and bool((self.phase == Phase.DONE).all())
-
-    @property
-    def waypoints(self) -> np.ndarray | None:
-        return None
 
     def act(self, obs: Any) -> np.ndarray:
         """(n, 4) action for the loaded embodiment: straight-line step towards the phase goal."""

@@ -24,8 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.experts.door import straight_line_action
-from awda_bench.policies.base import EpisodeContext
+from awda_bench.experts.base import PhaseExpert, check_config, straight_line_action
 
 
 class Phase(IntEnum):
@@ -79,37 +78,38 @@ class DrawerExpertConfig:
     """Most control steps any moving phase may take."""
 
     def __post_init__(self) -> None:
-        for name in (
-            "open_target_m",
-            "lead_m",
-            "hover_clearance_m",
-            "retreat_m",
-            "xy_tolerance_m",
-            "z_tolerance_m",
-            "slide_tolerance_m",
-        ):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        for name in ("close_steps", "release_steps", "phase_budget_steps"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        check_config(
+            self,
+            positive=(
+                "open_target_m",
+                "lead_m",
+                "hover_clearance_m",
+                "retreat_m",
+                "xy_tolerance_m",
+                "z_tolerance_m",
+                "slide_tolerance_m",
+            ),
+            at_least_one=(
+                "close_steps",
+                "release_steps",
+                "phase_budget_steps",
+            ),
+        )
 
 
 _GRIP_CLOSED_OPENING = {Phase.CLOSE, Phase.SLIDE}
 """Phases with the gripper closed when opening (closing keeps it closed until RETREAT)."""
 
 
-class DrawerExpert:
+class DrawerExpert(PhaseExpert):
     """Scripted expert of the ``drawer`` family (``AWDA-Drawer-v1``); batched over envs."""
 
+    config: DrawerExpertConfig
+    start_phase = Phase.HOVER
+    done_phase = Phase.DONE
+
     def __init__(self, config: DrawerExpertConfig | None = None, name: str = "scripted") -> None:
-        self.config = config or DrawerExpertConfig()
-        self.name = name
-        self._env: Any = None
-        self.phase = np.zeros(0, dtype=np.int64)
-        """(n,) current :class:`Phase` per env."""
-        self.phase_steps = np.zeros(0, dtype=np.int64)
-        """(n,) control steps spent in the current phase."""
+        super().__init__(config or DrawerExpertConfig(), name)
         self.pull = np.zeros(0, dtype=bool)
         """(n,) True: open by grasping and pulling; False: close by pushing."""
         self._retreat_z = np.zeros(0)
@@ -117,22 +117,10 @@ class DrawerExpert:
         """(n, 3) TCP minus handle centre when the grip closed [m]."""
 
     # ------------------------------------------------------------------ Policy protocol
-    def reset(self, ctx: EpisodeContext) -> None:
-        self._env = ctx.env
-        n = self._env.num_envs
-        self.phase = np.full(n, int(Phase.HOVER), dtype=np.int64)
-        self.phase_steps = np.zeros(n, dtype=np.int64)
+    def _reset_state(self, n: int) -> None:
         self.pull = self._env.wants_open.cpu().numpy().astype(bool)
         self._retreat_z = np.zeros(n)
         self._grip_offset = np.zeros((n, 3))
-
-    @property
-    def done(self) -> bool:
-        return bool(len(self.phase)) and bool((self.phase == Phase.DONE).all())
-
-    @property
-    def waypoints(self) -> np.ndarray | None:
-        return None
 
     def act(self, obs: Any) -> np.ndarray:
         """(n, 4) action for the loaded embodiment: straight-line step towards the phase goal."""

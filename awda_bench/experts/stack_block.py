@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.policies.base import EpisodeContext
+from awda_bench.experts.base import PhaseExpert, check_config, straight_line_action
 
 
 class Phase(IntEnum):
@@ -69,54 +69,43 @@ class StackBlockExpertConfig:
     """Most control steps any moving phase may take (the agent tracks ~8 mm per full step)."""
 
     def __post_init__(self) -> None:
-        for name in (
-            "hover_clearance_m",
-            "grasp_depth_m",
-            "carry_clearance_m",
-            "retreat_m",
-            "xy_tolerance_m",
-            "carry_xy_tolerance_m",
-            "z_tolerance_m",
-        ):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
-        for name in ("close_steps", "release_steps", "phase_budget_steps"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        check_config(
+            self,
+            positive=(
+                "hover_clearance_m",
+                "grasp_depth_m",
+                "carry_clearance_m",
+                "retreat_m",
+                "xy_tolerance_m",
+                "carry_xy_tolerance_m",
+                "z_tolerance_m",
+            ),
+            at_least_one=(
+                "close_steps",
+                "release_steps",
+                "phase_budget_steps",
+            ),
+        )
 
 
-class StackBlockExpert:
+class StackBlockExpert(PhaseExpert):
     """Scripted expert of the ``stack_block`` family (``AWDA-StackBlock-v1``); batched over envs."""
+
+    config: StackBlockExpertConfig
+    start_phase = Phase.HOVER
+    done_phase = Phase.DONE
 
     def __init__(
         self, config: StackBlockExpertConfig | None = None, name: str = "scripted"
     ) -> None:
-        self.config = config or StackBlockExpertConfig()
-        self.name = name
-        self._env: Any = None
-        self.phase = np.zeros(0, dtype=np.int64)
-        """(n,) current :class:`Phase` per env."""
-        self.phase_steps = np.zeros(0, dtype=np.int64)
-        """(n,) control steps spent in the current phase."""
+        super().__init__(config or StackBlockExpertConfig(), name)
         self._carry_z = np.zeros(0)
         self._release_z = np.zeros(0)
 
     # ------------------------------------------------------------------ Policy protocol
-    def reset(self, ctx: EpisodeContext) -> None:
-        self._env = ctx.env
-        n = self._env.num_envs
-        self.phase = np.full(n, int(Phase.HOVER), dtype=np.int64)
-        self.phase_steps = np.zeros(n, dtype=np.int64)
+    def _reset_state(self, n: int) -> None:
         self._carry_z = np.full(n, self.config.min_carry_z_m)
         self._release_z = np.zeros(n)
-
-    @property
-    def done(self) -> bool:
-        return bool(len(self.phase)) and bool((self.phase == Phase.DONE).all())
-
-    @property
-    def waypoints(self) -> np.ndarray | None:
-        return None
 
     def act(self, obs: Any) -> np.ndarray:
         """(n, 4) action for the loaded embodiment: straight-line step towards the phase goal."""
@@ -155,14 +144,8 @@ class StackBlockExpert:
             # CLOSE, RELEASE, DONE: hold position
             self.phase_steps[i] += 1
 
-        emb = env.embodiment
-        action = np.zeros((len(tcp), 4), dtype=np.float32)
-        step = (goal - tcp) / emb.max_step_m
-        step /= np.maximum(np.abs(step).max(axis=1, keepdims=True), 1.0)
-        action[:, :3] = step
         closed = np.isin(self.phase, [int(p) for p in _GRIP_CLOSED])
-        action[:, 3] = np.where(closed, 1.0, -1.0)
-        return emb.to_env_action(action)
+        return straight_line_action(goal, tcp, closed, env)
 
     # ------------------------------------------------------------------ phase logic
     def _advance(

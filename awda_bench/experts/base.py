@@ -1,0 +1,84 @@
+"""What every scripted expert shares: a per-env phase machine acting by straight-line TCP steps.
+
+An expert subclass names its phases (an ``IntEnum`` with ``start_phase``/``done_phase``), keeps
+its per-env extras in :meth:`PhaseExpert._reset_state`, and in ``act`` advances each env's phase
+and picks a goal; :func:`straight_line_action` turns goals into the embodiment's 4-D actions.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+
+from awda_bench.policies.base import EpisodeContext
+
+
+def straight_line_action(
+    goal: np.ndarray, tcp: np.ndarray, closed: np.ndarray, env: Any
+) -> np.ndarray:
+    """(n, 4) env action stepping the TCP straight toward ``goal`` (n, 3) [m], grip ``closed`` (n,).
+
+    The whole step is scaled down when any axis would exceed the action bound (straight lines), and
+    the grip sign is converted to the loaded embodiment's.
+    """
+    emb = env.embodiment
+    action = np.zeros((len(tcp), 4), dtype=np.float32)
+    step = (goal - tcp) / emb.max_step_m
+    step /= np.maximum(np.abs(step).max(axis=1, keepdims=True), 1.0)
+    action[:, :3] = step
+    action[:, 3] = np.where(closed, 1.0, -1.0)
+    return emb.to_env_action(action)
+
+
+def check_config(
+    config: object, positive: tuple[str, ...] = (), at_least_one: tuple[str, ...] = ()
+) -> None:
+    """``ValueError`` naming the field unless the ``positive`` fields are > 0 and the
+    ``at_least_one`` fields >= 1 (an expert config's ``__post_init__``)."""
+    for name in positive:
+        if not getattr(config, name) > 0:
+            raise ValueError(
+                f"{type(config).__name__}.{name} must be > 0, got {getattr(config, name)}"
+            )
+    for name in at_least_one:
+        if getattr(config, name) < 1:
+            raise ValueError(
+                f"{type(config).__name__}.{name} must be >= 1, got {getattr(config, name)}"
+            )
+
+
+class PhaseExpert:
+    """Policy-protocol scaffolding of the scripted experts (batched over envs)."""
+
+    start_phase: ClassVar[int] = 0
+    """Phase every env starts an episode in."""
+    done_phase: ClassVar[int]
+    """Phase meaning "finished"; the expert is done when every env is in it."""
+
+    def __init__(self, config: Any, name: str = "scripted") -> None:
+        self.config = config
+        self.name = name
+        self._env: Any = None
+        self.phase = np.zeros(0, dtype=np.int64)
+        """(n,) current phase per env."""
+        self.phase_steps = np.zeros(0, dtype=np.int64)
+        """(n,) control steps spent in the current phase."""
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        self._env = ctx.env
+        n = self._env.num_envs
+        self.phase = np.full(n, int(self.start_phase), dtype=np.int64)
+        self.phase_steps = np.zeros(n, dtype=np.int64)
+        self._reset_state(n)
+
+    def _reset_state(self, n: int) -> None:
+        """Reset the subclass's per-env extras for ``n`` envs (``self._env`` is set)."""
+
+    @property
+    def done(self) -> bool:
+        return bool(len(self.phase)) and bool((self.phase == self.done_phase).all())
+
+    @property
+    def waypoints(self) -> np.ndarray | None:
+        return None
