@@ -81,6 +81,6 @@ ensure_tox
 case "$what" in
   setup) "$PY" -m tox run -e py --notest ;;
   quick) "$PY" -m tox run -e quick ;;
-  test)  "$PY" -m tox run -e py,smoke ;;
+  test)  "$PY" -m tox run -e py,smoke,lint ;;
   *) echo "usage: bash scripts/setup.sh [setup|quick|test]" >&2; exit 2 ;;
 esac
