@@ -183,3 +183,19 @@ def test_markdown_and_latex_renderings() -> None:
     ]
     tex = to_latex(df)
     assert r"x\&y & 0.50 $\pm$ 0.10$^\dagger$ & -- \\" in tex and r"a\_b" in tex
+
+
+def test_stale_tables_from_an_earlier_report_are_removed(run_dir: Path, tmp_path: Path) -> None:
+    out = tmp_path / "rep"
+    out.mkdir()
+    stale = [out / "s4.md", out / "errors.csv", out / "figures" / "success_vs_snapshot_x_y.png"]
+    stale[2].parent.mkdir()
+    for path in stale:
+        path.write_text("from an older store")
+    notes = out / "notes.txt"  # not a report output: left alone
+    notes.write_text("mine")
+    result = write_report(run_dir, out)
+    written = {p.name for p in result.files}
+    for path in stale:
+        assert path.exists() == (path.name in written)
+    assert notes.read_text() == "mine"

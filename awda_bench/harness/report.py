@@ -236,4 +236,22 @@ def write_report(
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=int) + "\n")
     (out_dir / "report.md").write_text("\n".join(body))
     result.files += [out_dir / "summary.json", out_dir / "report.md"]
+    _remove_stale_outputs(out_dir, result.files)
     return result
+
+
+_OUTPUT_STEMS = ("s3", "s4", "per_snapshot", "grasp", "counts", "errors")
+"""Table files a report may write (``<stem>.md/.csv/.tex``)."""
+
+
+def _remove_stale_outputs(out_dir: Path, written: list[Path]) -> None:
+    """Delete tables and snapshot plots an earlier report left in ``out_dir`` that this one did
+    not write (e.g. an S4 table after the MOSAIC rows are gone), so the folder matches the store."""
+    keep = {p.resolve() for p in written}
+    candidates = [
+        out_dir / f"{stem}{ext}" for stem in _OUTPUT_STEMS for ext in (".md", ".csv", ".tex")
+    ]
+    candidates += sorted((out_dir / "figures").glob("success_vs_snapshot_*.png"))
+    for path in candidates:
+        if path.is_file() and path.resolve() not in keep:
+            path.unlink()
