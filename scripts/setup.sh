@@ -49,7 +49,12 @@ ensure_renderer() {
     fi
     $sudo apt-get update -qq
     DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq -t bookworm-backports mesa-vulkan-drivers libvulkan1 >/dev/null
-    log "Mesa $(mesa_version) installed"
+    have="$(mesa_version)"
+    if [ -z "$have" ] || ! version_ge "$have" 24.3; then
+      log "ERROR: after installing from bookworm-backports Mesa is '${have:-none}', still older than 24.3"
+      exit 1
+    fi
+    log "Mesa $have installed"
   elif [ "$id" = ubuntu ] || [ "$id" = debian ]; then
     if [ "$(id -u)" = 0 ] || [ -n "$sudo" ]; then
       DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq mesa-vulkan-drivers libvulkan1 >/dev/null || true
