@@ -7,11 +7,33 @@ and picks a goal; :func:`straight_line_action` turns goals into the embodiment's
 
 from __future__ import annotations
 
+from enum import IntEnum
 from typing import Any, ClassVar
 
 import numpy as np
 
 from awda_bench.policies.base import EpisodeContext
+
+
+class PickPhase(IntEnum):
+    """Phases of the pick-carry-place experts (pick_place, stack_block, basketball, nut_assembly)::
+
+    HOVER --> DESCEND --> CLOSE --> LIFT --> CARRY --> LOWER --> RELEASE --> RETREAT --> DONE
+    """
+
+    HOVER = 0
+    DESCEND = 1
+    CLOSE = 2
+    LIFT = 3
+    CARRY = 4
+    LOWER = 5
+    RELEASE = 6
+    RETREAT = 7
+    DONE = 8
+
+
+PICK_GRIP_CLOSED = frozenset({PickPhase.CLOSE, PickPhase.LIFT, PickPhase.CARRY, PickPhase.LOWER})
+"""Pick phases during which the gripper is commanded closed."""
 
 
 def straight_line_action(

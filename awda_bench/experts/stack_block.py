@@ -15,28 +15,13 @@ sets A down just above B. Works for any embodiment of :mod:`awda_bench.envs.embo
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import IntEnum
 from typing import Any
 
 import numpy as np
 
+from awda_bench.experts.base import PICK_GRIP_CLOSED as _GRIP_CLOSED
 from awda_bench.experts.base import PhaseExpert, check_config, straight_line_action
-
-
-class Phase(IntEnum):
-    HOVER = 0
-    DESCEND = 1
-    CLOSE = 2
-    LIFT = 3
-    CARRY = 4
-    LOWER = 5
-    RELEASE = 6
-    RETREAT = 7
-    DONE = 8
-
-
-_GRIP_CLOSED = {Phase.CLOSE, Phase.LIFT, Phase.CARRY, Phase.LOWER}
-"""Phases during which the gripper is commanded closed."""
+from awda_bench.experts.base import PickPhase as Phase
 
 
 @dataclass(frozen=True)
