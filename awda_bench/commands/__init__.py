@@ -3,4 +3,13 @@
 :data:`COMMANDS` is the order they are listed in ``python -m awda_bench --help``.
 """
 
-COMMANDS: tuple[str, ...] = ("doctor", "run", "report", "bench", "demo", "describe")
+COMMANDS: tuple[str, ...] = (
+    "doctor",
+    "run",
+    "report",
+    "bench",
+    "demo",
+    "describe",
+    "collect",
+    "replay",
+)

@@ -1,0 +1,153 @@
+"""What ``python -m awda_bench collect`` decides, as frozen, validated dataclasses."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from awda_bench.errors import UnknownChoiceError, UsageError
+from awda_bench.suites import SUITES_DIR
+
+SPLITS: tuple[str, ...] = ("train", "test")
+"""``train``: the suite's training tasks; ``test``: its held-out (evaluated) tasks."""
+
+EMBODIMENT_CHOICES: tuple[str, ...] = ("agent", "demonstrator", "both")
+"""``--embodiment`` values; ``both`` records the agent and the demonstrator."""
+
+ROLE_AGENT = "agent"
+ROLE_DEMONSTRATOR = "demonstrator"
+ROLE_SYNTHESIZED = "synthesized"
+ROLES: tuple[str, ...] = (ROLE_AGENT, ROLE_DEMONSTRATOR, ROLE_SYNTHESIZED)
+"""Who produced a unit's episodes: a scripted expert of an embodiment, or trajectory synthesis
+(free-space motion through random waypoints, recorded by the agent)."""
+
+DEFAULT_IMAGE_SIZE: tuple[int, int] = (240, 320)
+"""Third-person frame (height, width) [px]: the reference pick-and-place images."""
+
+DEFAULT_DEPTH_SIZE: tuple[int, int] = (128, 128)
+"""Wrist depth frame (height, width) [px]: ``TosviConfig``'s default depth input."""
+
+_SIZE = re.compile(r"^\s*(\d+)\s*[xX]\s*(\d+)\s*$")
+
+
+def parse_image_size(text: str) -> tuple[int, int]:
+    """``"HxW"`` -> ``(H, W)``, refusing sizes below what the models accept (``TrunkConfig``)."""
+    from awda_bench.models.config import TrunkConfig
+
+    match = _SIZE.match(text)
+    if match is None:
+        raise UsageError(f"--image-size {text!r} is not HxW (e.g. 240x320)")
+    height, width = int(match.group(1)), int(match.group(2))
+    try:
+        TrunkConfig(image_height_px=height, image_width_px=width, backbone_weights="none")
+    except UsageError as exc:
+        raise UsageError(
+            f"--image-size {text}: the models cannot take it ({exc}); use at least 64x64"
+        ) from None
+    return height, width
+
+
+@dataclass(frozen=True)
+class SynthesisConfig:
+    """Trajectory synthesis (SPEC §6 TS): free-space motion through 1-3 random waypoints.
+
+    The waypoint box is in the world frame [m] (table top z = 0, robot base at x = -0.615). It
+    covers both pick-and-place bins, stays inside the controller's workspace (base-frame box and
+    0.75 m horizontal reach: the far corner (0.05, +-0.30) is 0.73 m from the base axis) and keeps
+    the TCP above the tallest object (milk carton top ~0.16 m), so synthesized motion never grasps
+    or pushes objects.
+    """
+
+    low_m: tuple[float, float, float] = (-0.25, -0.30, 0.20)
+    """Lower corner of the waypoint box [m]."""
+    high_m: tuple[float, float, float] = (0.05, 0.30, 0.38)
+    """Upper corner of the waypoint box [m]."""
+    min_waypoints: int = 1
+    """Fewest waypoints per trajectory (reference: 1)."""
+    max_waypoints: int = 3
+    """Most waypoints per trajectory (reference: 3)."""
+    settle_steps: int = 3
+    """Zero-motion steps recorded after the last waypoint is reached."""
+
+    def __post_init__(self) -> None:
+        if any(lo >= hi for lo, hi in zip(self.low_m, self.high_m, strict=True)):
+            raise UsageError(
+                f"SynthesisConfig.low_m {self.low_m} must be below high_m {self.high_m}"
+            )
+        if not 1 <= self.min_waypoints <= self.max_waypoints:
+            raise UsageError(
+                "SynthesisConfig needs 1 <= min_waypoints <= max_waypoints, got "
+                f"{self.min_waypoints}, {self.max_waypoints}"
+            )
+        if self.settle_steps < 0:
+            raise UsageError(f"SynthesisConfig.settle_steps must be >= 0, got {self.settle_steps}")
+
+
+@dataclass(frozen=True)
+class CollectConfig:
+    """Everything ``python -m awda_bench collect`` decides."""
+
+    suite: str
+    """Suite name (``tasks/<suite>.toml``)."""
+    split: str
+    """``train`` (training tasks) or ``test`` (held-out tasks); see :data:`SPLITS`."""
+    embodiment: str
+    """``agent``, ``demonstrator`` or ``both``."""
+    episodes_per_task: int
+    """Successful episodes kept per task and embodiment (failed ones are discarded and replaced)."""
+    out: Path
+    """DATA_DIR: where shards, trajectory files and ``manifest.json`` go."""
+    workers: int = 1
+    """Worker processes (0: record in this process)."""
+    image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE
+    """Third-person frame (height, width) [px]."""
+    depth_size: tuple[int, int] = DEFAULT_DEPTH_SIZE
+    """Agent wrist depth frame (height, width) [px]."""
+    seed: int = 0
+    """Base seed every episode seed is derived from."""
+    synthesize: int = 0
+    """Synthesized trajectories (spread over the split's tasks, agent embodiment)."""
+    tasks: tuple[int, ...] = ()
+    """Only these tasks of the split (empty: all of them)."""
+    jpeg_quality: int = 90
+    """JPEG quality of the third-person frames (OpenCV scale 0-100)."""
+    max_attempts_factor: int = 3
+    """A unit gives up (error) after ``factor * episodes + 10`` attempts: the expert is broken."""
+    episode_timeout_s: float = 600.0
+    """Watchdog: an episode running longer is killed and recorded as an error [s]."""
+    synthesis: SynthesisConfig = field(default_factory=SynthesisConfig)
+    """Trajectory synthesis parameters."""
+    suites_dir: Path = SUITES_DIR
+    """Where suite files live."""
+    progress: bool = True
+    """Show a progress bar on stderr."""
+
+    def __post_init__(self) -> None:
+        if self.split not in SPLITS:
+            raise UnknownChoiceError("split", self.split, SPLITS)
+        if self.embodiment not in EMBODIMENT_CHOICES:
+            raise UnknownChoiceError("embodiment", self.embodiment, EMBODIMENT_CHOICES)
+        if self.episodes_per_task < 0:
+            raise UsageError(f"--episodes-per-task must be >= 0, got {self.episodes_per_task}")
+        if self.synthesize < 0:
+            raise UsageError(f"--synthesize must be >= 0, got {self.synthesize}")
+        if self.episodes_per_task == 0 and self.synthesize == 0:
+            raise UsageError("nothing to collect: give --episodes-per-task > 0 or --synthesize > 0")
+        if self.workers < 0:
+            raise UsageError(f"--workers must be >= 0, got {self.workers}")
+        if self.seed < 0:
+            raise UsageError(f"--seed must be >= 0, got {self.seed}")
+        if not 1 <= self.jpeg_quality <= 100:
+            raise UsageError(f"--jpeg-quality must be in 1..100, got {self.jpeg_quality}")
+        if self.episode_timeout_s <= 0:
+            raise UsageError(f"--episode-timeout must be > 0, got {self.episode_timeout_s}")
+        if self.max_attempts_factor < 1:
+            raise UsageError(f"max_attempts_factor must be >= 1, got {self.max_attempts_factor}")
+
+    @property
+    def expert_roles(self) -> tuple[str, ...]:
+        """Roles whose scripted expert is recorded."""
+        if self.embodiment == "both":
+            return (ROLE_AGENT, ROLE_DEMONSTRATOR)
+        return (self.embodiment,)

@@ -1,0 +1,198 @@
+"""The collection plan: units, seeds and the dataset definition, all fixed before scheduling.
+
+A *unit* is ``(role, task)``; it must end with ``planned`` successful episodes. Attempt ``i`` of a
+unit has a seed hashed from ``(suite, base seed, task, i, "collect-<split>-<role>")``
+(:func:`awda_bench.harness.episode_specs.derive_seed`), never drawn from a shared generator, so
+what attempt ``i`` records does not depend on the worker count or order. Evaluation hashes the
+roles ``agent``/``demo``, so collected scenes are independent of evaluated ones.
+
+Which attempts are kept::
+
+    attempts 0 .. planned-1 are scheduled; each failed attempt schedules the next unused index
+    => the unit holds the successful attempts among the shortest prefix 0..M-1 that contains
+       `planned` successes, and `M - planned` attempts are counted as discards
+
+That prefix depends on the seeds only, so 1 or 2 workers (or a resumed run) keep the same episodes.
+
+Splits: pick-and-place (``episode_unit = "task"``) trains on tasks 0-13 and holds out 14-15. For
+MOSAIC (``episode_unit = "family"``) the held-out unit is a whole family, so ``train`` collects
+every family (a leave-one-family-out training set is a selection of files) and ``test`` the
+evaluated tasks, under seeds disjoint from ``train``'s.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass
+from importlib import metadata
+from pathlib import Path
+
+from awda_bench.data.config import ROLE_SYNTHESIZED, CollectConfig
+from awda_bench.errors import UsageError
+from awda_bench.harness.episode_specs import derive_seed
+from awda_bench.suites import Suite, TaskDef, load_suite
+
+FORMAT_VERSION = 1
+"""Bumped whenever the layout of the trajectory files or the manifest changes."""
+
+CODE_PATHS: tuple[str, ...] = (
+    "envs",
+    "experts",
+    "robot",
+    "primitives",
+    "mining.py",
+    "demo_recording.py",
+    "trajectory.py",
+    "data/recorder.py",
+    "data/trajectory_file.py",
+)
+"""Package paths whose source decides what an episode records (hashed into the fingerprint)."""
+
+PACKAGE_DIR = Path(__file__).resolve().parent.parent
+
+
+@dataclass(frozen=True)
+class CollectJob:
+    """One attempt of one unit: the worker resets ``task``'s env with ``seed`` and records."""
+
+    role: str
+    """``agent``, ``demonstrator`` or ``synthesized``."""
+    task: int
+    """Suite-wide task index."""
+    attempt: int
+    """Attempt index within the unit (0-based)."""
+    seed: int
+    """Scene seed (``env.reset(seed=seed)``) and the synthesis waypoint generator's seed."""
+
+    @property
+    def unit(self) -> tuple[str, int]:
+        return (self.role, self.task)
+
+
+@dataclass(frozen=True)
+class Unit:
+    """One (role, task) and how many successful episodes it must hold."""
+
+    role: str
+    task: int
+    family: str
+    planned: int
+
+    @property
+    def key(self) -> tuple[str, int]:
+        return (self.role, self.task)
+
+    @property
+    def name(self) -> str:
+        """Relative path stem of the unit's files: ``<role>/<family>/task_XX``."""
+        return f"{self.role}/{self.family}/task_{self.task:02d}"
+
+
+def split_tasks(suite: Suite, split: str) -> tuple[TaskDef, ...]:
+    """The tasks a split covers (see the module docstring)."""
+    if split == "test":
+        return suite.eval_tasks
+    if suite.episode_unit == "family":
+        return suite.tasks
+    return suite.train_tasks
+
+
+def code_sha256() -> str:
+    """SHA-256 over the source files listed in :data:`CODE_PATHS` (path and bytes)."""
+    digest = hashlib.sha256()
+    for rel in CODE_PATHS:
+        path = PACKAGE_DIR / rel
+        files = sorted(path.rglob("*.py")) if path.is_dir() else [path]
+        for file in files:
+            digest.update(str(file.relative_to(PACKAGE_DIR)).encode())
+            digest.update(file.read_bytes())
+    return digest.hexdigest()
+
+
+def job_seed(config: CollectConfig, task: int, attempt: int, role: str) -> int:
+    """Seed of attempt ``attempt`` of unit ``(role, task)``."""
+    return derive_seed(config.suite, config.seed, task, attempt, f"collect-{config.split}-{role}")
+
+
+def make_job(config: CollectConfig, role: str, task: int, attempt: int) -> CollectJob:
+    return CollectJob(role, task, attempt, job_seed(config, task, attempt, role))
+
+
+@dataclass(frozen=True)
+class CollectPlan:
+    """A validated collection: the suite, its units and the dataset definition."""
+
+    suite: Suite
+    units: tuple[Unit, ...]
+    definition: dict
+    """What the data depends on (hashed into :attr:`fingerprint`; stored in the manifest)."""
+
+    @property
+    def fingerprint(self) -> str:
+        """First 16 hex digits of the SHA-256 of :attr:`definition`'s canonical JSON."""
+        blob = json.dumps(self.definition, sort_keys=True, separators=(",", ":")).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+    def max_attempts(self, unit: Unit, factor: int) -> int:
+        return factor * unit.planned + 10
+
+
+def make_plan(config: CollectConfig) -> CollectPlan:
+    """Validate ``config`` against its suite and list the units; writes nothing."""
+    suite = load_suite(config.suite, config.suites_dir)
+    from awda_bench.experts import EXPERT_SUITES
+
+    if suite.name not in EXPERT_SUITES:
+        raise UsageError(
+            f"suite {suite.name!r} has no scripted expert to collect with; "
+            f"choose one of: {', '.join(EXPERT_SUITES)}"
+        )
+    tasks = split_tasks(suite, config.split)
+    available = [t.index for t in tasks]
+    for index in config.tasks:
+        if index not in available:
+            suite.task(index)  # unknown task: lists the suite's tasks
+            raise UsageError(
+                f"task {index} is not in the {config.split!r} split of {suite.name!r}; "
+                f"choose among {available}"
+            )
+    if config.tasks:
+        tasks = tuple(t for t in tasks if t.index in config.tasks)
+    units: list[Unit] = []
+    if config.episodes_per_task:
+        for task in tasks:
+            for role in config.expert_roles:
+                units.append(Unit(role, task.index, task.family, config.episodes_per_task))
+    if config.synthesize:
+        n = len(tasks)
+        for j, task in enumerate(tasks):
+            count = config.synthesize // n + (1 if j < config.synthesize % n else 0)
+            if count:
+                units.append(Unit(ROLE_SYNTHESIZED, task.index, task.family, count))
+    order = {t.index: i for i, t in enumerate(tasks)}
+    units.sort(key=lambda u: (order[u.task], u.role))
+    try:
+        version = metadata.version("awda_bench")
+    except metadata.PackageNotFoundError:
+        version = "unknown"
+    definition = {
+        "format_version": FORMAT_VERSION,
+        "suite": suite.name,
+        "suite_sha256": hashlib.sha256(suite.path.read_bytes()).hexdigest(),
+        "split": config.split,
+        "roles": sorted({u.role for u in units}),
+        "tasks": [t.index for t in tasks],
+        "episodes_per_task": config.episodes_per_task,
+        "synthesize": config.synthesize,
+        "seed": config.seed,
+        "image_size": list(config.image_size),
+        "depth_size": list(config.depth_size),
+        "jpeg_quality": config.jpeg_quality,
+        "synthesis": asdict(config.synthesis),
+        "horizon_steps": suite.horizon_steps,
+        "control_freq_hz": suite.control_freq_hz,
+        "awda_bench_version": version,
+        "code_sha256": code_sha256(),
+    }
+    return CollectPlan(suite=suite, units=tuple(units), definition=definition)

@@ -1,0 +1,412 @@
+"""Record one collection job in a worker: reset, act, capture, and return the episode's arrays.
+
+Per control step ``t`` (state *before* action ``t``; ``T`` actions, ``T + 1`` states)::
+
+    env.reset(seed, options={"task": variation})                                  state 0
+    for t in 0 .. T-1:
+        record state t: third-person RGB (JPEG), wrist depth (agent roles), TCP pose, gripper
+                        opening, qpos/qvel, env state (get_state_dict), simulator truths
+        a_t = expert.act(obs_t)    or the free-space primitive toward the next random waypoint
+        env.step(a_t)                                                             state t + 1
+        stop SETTLE_STEPS after the expert is done (synthesis: settle_steps after the last
+        waypoint), or at the suite's horizon
+    record state T (no truths: they describe the state an action is taken from)
+    mined attributes (grasp, press) from the T recorded states and commanded actions
+
+A camera frame costs ~25-50 ms on lavapipe; every recorded state renders the third-person camera,
+and for the agent also the wrist depth camera (T-OSVI+depth needs it); nothing else renders.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from awda_bench.data.config import (
+    ROLE_AGENT,
+    ROLE_DEMONSTRATOR,
+    ROLE_SYNTHESIZED,
+    CollectConfig,
+    SynthesisConfig,
+)
+from awda_bench.data.plan import CollectJob
+from awda_bench.suites import Suite, load_suite
+
+ENV_CACHE_SIZE = 4
+"""Envs a worker keeps built (LRU); MOSAIC units switch env ids, pick-and-place needs two."""
+
+
+@dataclass
+class EpisodeData:
+    """Everything one attempt recorded (no batch dimension)."""
+
+    job: CollectJob
+    success: bool
+    """Kept or discarded: the task's success at the end (synthesis: every waypoint reached)."""
+    actions: np.ndarray
+    """(T, 4) float32 env actions."""
+    success_steps: np.ndarray
+    """(T,) bool: the env's ``success`` after each action."""
+    rgb_jpeg: list[bytes]
+    """T + 1 JPEG-encoded third-person frames (RGB)."""
+    obs: dict[str, Any]
+    """Nested dict of (T + 1, ...) arrays (``agent``, ``extra``, ``sensor_param``, and
+    ``sensor_data/wrist_depth/depth`` as uint16 millimetres for agent roles)."""
+    env_states: dict[str, Any]
+    """Nested dict of (T + 1, ...) float32 arrays, the tree of ``env.get_state_dict()``."""
+    attributes: dict[str, np.ndarray]
+    """(T,) bool mined attributes: ``grasp``, ``press``."""
+    truth: dict[str, np.ndarray]
+    """(T,) bool simulator truths of the env (``grasp``; ``press`` where the task has it)."""
+    meta: dict[str, Any]
+    """JSON-able episode description (written to the trajectory file's JSON)."""
+    env_info: dict[str, Any]
+    """ManiSkill ``env_info``: ``env_id``, ``env_kwargs``, ``max_episode_steps``."""
+    timing: dict[str, float] = field(default_factory=dict)
+    """Wall time [s] of the episode and of its rendering, frames rendered (never written)."""
+
+    @property
+    def steps(self) -> int:
+        return len(self.actions)
+
+
+def _to_numpy_tree(tree: Any) -> Any:
+    """Nested dict of (1, ...) tensors/arrays -> nested dict of (...) float32 arrays."""
+    if isinstance(tree, dict):
+        return {k: _to_numpy_tree(v) for k, v in tree.items()}
+    if hasattr(tree, "detach"):
+        tree = tree.detach().cpu().numpy()
+    return np.asarray(tree, dtype=np.float32)[0]
+
+
+def _stack_trees(trees: list[Any]) -> Any:
+    first = trees[0]
+    if isinstance(first, dict):
+        return {k: _stack_trees([t[k] for t in trees]) for k in first}
+    return np.stack(trees)
+
+
+def _camera_params(env: Any, uid: str) -> dict[str, np.ndarray]:
+    params = env.unwrapped.scene.sensors[uid].get_params()
+    out = {}
+    for key in ("intrinsic_cv", "extrinsic_cv", "cam2world_gl"):
+        value = params[key]
+        if hasattr(value, "detach"):
+            value = value.detach().cpu().numpy()
+        out[key] = np.asarray(value, dtype=np.float32)[0]
+    return out
+
+
+def encode_jpeg(rgb: np.ndarray, quality: int) -> bytes:
+    """(H, W, 3) uint8 RGB -> JPEG bytes (OpenCV)."""
+    import cv2
+
+    ok, buf = cv2.imencode(".jpg", rgb[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
+    if not ok:
+        raise RuntimeError("OpenCV could not encode a JPEG frame")
+    return buf.tobytes()
+
+
+class EpisodeRecorder:
+    """Worker-side: owns the envs (built on first use, LRU-cached) and records jobs."""
+
+    def __init__(self, config: CollectConfig) -> None:
+        self.config = config
+        self.suite: Suite = load_suite(config.suite, config.suites_dir)
+        self._envs: OrderedDict[tuple[str, str], tuple[Any, dict[str, Any]]] = OrderedDict()
+
+    def env_kwargs(self, uid: str, control_mode: str) -> dict[str, Any]:
+        """``gym.make`` keyword arguments recorded in the trajectory file (render backend aside:
+        it depends on the machine, not on the data)."""
+        height, width = self.config.image_size
+        sensors: dict[str, Any] = {"third_person": {"height": height, "width": width}}
+        if uid == "panda_awda":
+            dh, dw = self.config.depth_size
+            sensors["wrist_depth"] = {"height": dh, "width": dw}
+        return {
+            "robot_uids": uid,
+            "control_mode": control_mode,
+            "obs_mode": "state",
+            "reward_mode": "none",
+            "num_envs": 1,
+            "sensor_configs": sensors,
+        }
+
+    def env_for(self, task: int, role: str) -> tuple[Any, dict[str, Any]]:
+        import gymnasium as gym
+
+        import awda_bench.envs  # noqa: F401  (registers the envs and robots)
+        from awda_bench.demo_recording import EMBODIMENT_UIDS
+        from awda_bench.envs.embodiments import embodiment
+        from awda_bench.render_device import render_backend
+
+        embodiment_name = ROLE_DEMONSTRATOR if role == ROLE_DEMONSTRATOR else ROLE_AGENT
+        uid = EMBODIMENT_UIDS[embodiment_name]
+        key = (self.suite.env_id_for(task), uid)
+        if key in self._envs:
+            self._envs.move_to_end(key)
+            return self._envs[key]
+        while len(self._envs) >= ENV_CACHE_SIZE:
+            _, (old, _) = self._envs.popitem(last=False)
+            old.close()
+        kwargs = self.env_kwargs(uid, embodiment(uid).control_mode)
+        env = gym.make(
+            key[0],
+            max_episode_steps=self.suite.horizon_steps,
+            render_backend=render_backend(),
+            **kwargs,
+        )
+        env_info = {
+            "env_id": key[0],
+            "env_kwargs": kwargs,
+            "max_episode_steps": self.suite.horizon_steps,
+        }
+        self._envs[key] = (env, env_info)
+        return self._envs[key]
+
+    def close(self) -> None:
+        for env, _ in self._envs.values():
+            env.close()
+        self._envs.clear()
+
+    def record(self, job: CollectJob) -> EpisodeData:
+        """Play and record ``job``; exceptions propagate (the pool turns them into errors)."""
+        from awda_bench.harness.episode_runner import seed_globals
+
+        t_start = time.perf_counter()
+        env, env_info = self.env_for(job.task, job.role)
+        task = self.suite.task(job.task)
+        seed_globals(job.seed)
+        reset_kwargs = {"seed": job.seed, "options": {"task": task.reset_task}}
+        obs, info = env.reset(**reset_kwargs)
+        rec = _Recording(env, self.config, with_depth=job.role != ROLE_DEMONSTRATOR)
+        if job.role == ROLE_SYNTHESIZED:
+            success, extra_meta = self._play_synthesis(env, rec, job.seed)
+            info = rec.last_info
+        else:
+            success, extra_meta = self._play_expert(env, rec, obs, job)
+            info = rec.last_info
+        rec.capture_state(truth=False)
+        data = rec.finish(job, success)
+        base = env.unwrapped
+        flags = {}
+        for name in ("success", "success_once", "reached", "grasped"):
+            if name in info:
+                flags[name] = bool(np.asarray(_numpy(info[name])).reshape(-1)[0])
+        data.meta = {
+            **{
+                "episode_seed": job.seed,
+                "reset_kwargs": reset_kwargs,
+                "control_mode": base.control_mode,
+                "elapsed_steps": data.steps,
+                "success": flags.get("success", False),
+                "info": flags,
+                "suite": self.suite.name,
+                "split": self.config.split,
+                "task": job.task,
+                "task_name": task.name,
+                "family": task.family,
+                "variation": task.reset_task,
+                "role": job.role,
+                "embodiment": ROLE_DEMONSTRATOR if job.role == ROLE_DEMONSTRATOR else ROLE_AGENT,
+                "robot_uid": base.robot_uids,
+                "attempt": job.attempt,
+                "kept": success,
+                "head": 1 if job.role == ROLE_SYNTHESIZED else 0,
+                "max_step_m": base.embodiment.max_step_m,
+                "control_freq_hz": self.suite.control_freq_hz,
+                **extra_meta,
+            },
+            **data.meta,
+        }
+        data.env_info = env_info
+        data.timing["wall_s"] = time.perf_counter() - t_start
+        return data
+
+    def _play_expert(
+        self, env: Any, rec: _Recording, obs: Any, job: CollectJob
+    ) -> tuple[bool, dict[str, Any]]:
+        from awda_bench.demo_recording import SETTLE_STEPS
+        from awda_bench.experts import make_expert
+        from awda_bench.policies.base import EpisodeContext, EpisodeSpec
+
+        base = env.unwrapped
+        embodiment_name = ROLE_DEMONSTRATOR if job.role == ROLE_DEMONSTRATOR else ROLE_AGENT
+        expert = make_expert(self.suite.name, embodiment_name)
+        spec = EpisodeSpec(self.suite.name, job.task, job.attempt, job.seed, job.seed)
+        expert.reset(EpisodeContext(env=base, spec=spec))
+        settle = 0
+        for _ in range(self.suite.horizon_steps):
+            rec.capture_state(truth=True)
+            action = np.asarray(expert.act(obs), dtype=np.float32).reshape(1, 4)
+            obs = rec.step(action)
+            if expert.done:
+                settle += 1
+                if settle > SETTLE_STEPS:
+                    break
+        success = bool(np.asarray(_numpy(rec.last_info["success"])).reshape(-1)[0])
+        return success, {"expert_done": bool(expert.done)}
+
+    def _play_synthesis(self, env: Any, rec: _Recording, seed: int) -> tuple[bool, dict[str, Any]]:
+        from awda_bench.primitives.base import GRIP_OPEN, RobotState, hold_action
+        from awda_bench.primitives.config import FreeSpaceConfig
+        from awda_bench.primitives.free_space import FreeSpace
+
+        cfg: SynthesisConfig = self.config.synthesis
+        base = env.unwrapped
+        emb = base.embodiment
+        rng = np.random.default_rng(seed)
+        count = int(rng.integers(cfg.min_waypoints, cfg.max_waypoints + 1))
+        waypoints = rng.uniform(cfg.low_m, cfg.high_m, size=(count, 3))
+        motion_config = FreeSpaceConfig(max_step_m=emb.max_step_m)
+        motions = [FreeSpace(w, motion_config, grip=GRIP_OPEN) for w in waypoints]
+        current, settle = 0, 0
+        for _ in range(self.suite.horizon_steps):
+            state = RobotState(
+                tcp_pos=base.agent.tcp_pose.p[0].cpu().numpy().astype(np.float64),
+                gripper_opening_m=float(base.gripper_opening_m()[0]),
+            )
+            action = None
+            while current < len(motions):
+                action = motions[current].step(state)
+                if action is not None:
+                    break
+                current += 1
+            if action is None:
+                if settle >= cfg.settle_steps:
+                    break
+                settle += 1
+                action = hold_action(GRIP_OPEN)
+            rec.capture_state(truth=True)
+            env_action = emb.to_env_action(np.asarray(action, dtype=np.float32).reshape(1, 4))
+            rec.step(env_action)
+        reached = [bool(m.reached) for m in motions]
+        return all(reached), {
+            "waypoints": waypoints.tolist(),
+            "waypoints_reached": reached,
+        }
+
+
+def _numpy(value: Any) -> np.ndarray:
+    if hasattr(value, "detach"):
+        return value.detach().cpu().numpy()
+    return np.asarray(value)
+
+
+class _Recording:
+    """Accumulates one episode's per-state and per-action arrays."""
+
+    def __init__(self, env: Any, config: CollectConfig, with_depth: bool) -> None:
+        self.env = env
+        self.base = env.unwrapped
+        self.config = config
+        self.with_depth = with_depth
+        self.jpeg: list[bytes] = []
+        self.depth_mm: list[np.ndarray] = []
+        self.wrist_intrinsic: list[np.ndarray] = []
+        self.wrist_cam2world: list[np.ndarray] = []
+        self.tcp_pose: list[np.ndarray] = []
+        self.opening: list[float] = []
+        self.qpos: list[np.ndarray] = []
+        self.qvel: list[np.ndarray] = []
+        self.states: list[Any] = []
+        self.truth: dict[str, list[bool]] = {}
+        self.actions: list[np.ndarray] = []
+        self.success: list[bool] = []
+        self.last_info: dict[str, Any] = {}
+        self.render_s = 0.0
+        self.third_person = _camera_params(env, "third_person")
+
+    def capture_state(self, truth: bool) -> None:
+        from awda_bench.robot.cameras import capture_rgb, capture_wrist_depth
+
+        base = self.base
+        t0 = time.perf_counter()
+        rgb = capture_rgb(self.env, "third_person")[0]
+        self.jpeg.append(encode_jpeg(rgb, self.config.jpeg_quality))
+        if self.with_depth:
+            depth = capture_wrist_depth(self.env)
+            mm = np.clip(np.round(depth.depth_m[0] * 1000.0), 0, np.iinfo(np.uint16).max)
+            self.depth_mm.append(mm.astype(np.uint16)[..., None])
+            self.wrist_intrinsic.append(depth.intrinsic_cv[0].astype(np.float32))
+            self.wrist_cam2world.append(depth.cam2world_cv[0].astype(np.float32))
+        self.render_s += time.perf_counter() - t0
+        self.tcp_pose.append(_numpy(base.agent.tcp_pose.raw_pose)[0].astype(np.float32))
+        self.opening.append(float(base.gripper_opening_m()[0]))
+        self.qpos.append(_numpy(base.agent.robot.get_qpos())[0].astype(np.float32))
+        self.qvel.append(_numpy(base.agent.robot.get_qvel())[0].astype(np.float32))
+        self.states.append(_to_numpy_tree(base.get_state_dict()))
+        if truth:
+            for name, value in base.truth_signals().items():
+                self.truth.setdefault(name, []).append(bool(_numpy(value).reshape(-1)[0]))
+
+    def step(self, action: np.ndarray) -> Any:
+        obs, _, _, _, info = self.env.step(action)
+        self.actions.append(np.asarray(action, dtype=np.float32).reshape(4))
+        self.success.append(bool(_numpy(info["success"]).reshape(-1)[0]))
+        self.last_info = info
+        return obs
+
+    def finish(self, job: CollectJob, success: bool) -> EpisodeData:
+        from awda_bench.mining import PressMiningConfig, mine_grasp, mine_press
+        from awda_bench.trajectory import Trajectory
+
+        T = len(self.actions)
+        n = T + 1
+        tcp_pose = np.stack(self.tcp_pose)
+        opening = np.asarray(self.opening, dtype=np.float32)
+        actions = np.asarray(self.actions, dtype=np.float32).reshape(T, 4)
+        method_actions = actions.copy()
+        if not self.base.embodiment.close_when_positive:
+            method_actions[:, 3] = -method_actions[:, 3]
+        truth = {k: np.asarray(v, dtype=bool) for k, v in self.truth.items()}
+        trajectory = Trajectory(
+            tcp_pos=tcp_pose[:T, :3].astype(np.float64),
+            gripper_opening_m=opening[:T].astype(np.float64),
+            actions=method_actions,
+            truth=truth,
+        )
+        attributes = {
+            "grasp": mine_grasp(trajectory),
+            "press": mine_press(
+                trajectory, PressMiningConfig(max_step_m=self.base.embodiment.max_step_m)
+            ),
+        }
+        tp = self.third_person
+        obs: dict[str, Any] = {
+            "agent": {"qpos": np.stack(self.qpos), "qvel": np.stack(self.qvel)},
+            "extra": {"tcp_pose": tcp_pose, "gripper_opening_m": opening[:, None]},
+            "sensor_param": {
+                "third_person": {k: np.repeat(v[None], n, axis=0) for k, v in tp.items()}
+            },
+        }
+        if self.with_depth:
+            obs["sensor_data"] = {"wrist_depth": {"depth": np.stack(self.depth_mm)}}
+            obs["sensor_param"]["wrist_depth"] = {
+                "intrinsic_cv": np.stack(self.wrist_intrinsic),
+                "cam2world_cv": np.stack(self.wrist_cam2world),
+            }
+        height, width = self.config.image_size
+        meta: dict[str, Any] = {
+            "image_size": [height, width],
+            "camera": {k: v.tolist() for k, v in tp.items()},
+        }
+        frames = n * (2 if self.with_depth else 1)
+        return EpisodeData(
+            job=job,
+            success=success,
+            actions=actions,
+            success_steps=np.asarray(self.success, dtype=bool),
+            rgb_jpeg=self.jpeg,
+            obs=obs,
+            env_states=_stack_trees(self.states),
+            attributes=attributes,
+            truth=truth,
+            meta=meta,
+            env_info={},
+            timing={"render_s": self.render_s, "frames": float(frames)},
+        )
