@@ -42,3 +42,7 @@ class CorruptFileError(UsageError):
 
 class ProtocolMismatchError(UsageError):
     """A results store was written under another evaluation protocol."""
+
+
+class MissingExtraError(UsageError):
+    """An option needs an optional dependency (an extra) that is not installed."""

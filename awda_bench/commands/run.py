@@ -7,6 +7,7 @@ import os
 import sys
 from pathlib import Path
 
+from awda_bench.harness.backends import BACKENDS
 from awda_bench.harness.methods import DEFAULT_METHOD, method_names
 from awda_bench.harness.results_store import STORE_NAME
 from awda_bench.harness.sweep import SweepConfig, run_sweep
@@ -56,7 +57,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--workers",
         type=int,
         default=DEFAULT_WORKERS,
-        help=f"worker processes, 0 = in this process (default {DEFAULT_WORKERS})",
+        help=f"worker processes (or Ray actors), 0 = in this process (default {DEFAULT_WORKERS})",
+    )
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default=BACKENDS[0],
+        help="where --workers run: local processes, or Ray actors (a private local Ray instance, "
+        "or the cluster at --ray-address; needs the 'ray' extra); default local",
+    )
+    parser.add_argument(
+        "--ray-address",
+        metavar="ADDRESS",
+        help="join this Ray cluster (HOST:6379, 'auto', ray://HOST:10001) with --backend ray",
     )
     parser.add_argument(
         "--out", type=Path, default=Path("runs"), help="run directory (default runs/)"
@@ -103,6 +116,8 @@ def config_from_args(args: argparse.Namespace) -> SweepConfig:
         episodes=episodes,
         seed=args.seed,
         workers=args.workers,
+        backend=args.backend,
+        ray_address=args.ray_address,
         tasks=tuple(args.task),
         episode_timeout_s=args.episode_timeout,
         suites_dir=args.tasks_dir,

@@ -12,6 +12,7 @@ from __future__ import annotations
 import platform
 import sys
 import time
+from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
@@ -19,6 +20,7 @@ from pathlib import Path
 from tqdm import tqdm
 
 from awda_bench.errors import UsageError
+from awda_bench.harness.backends import BACKENDS, EpisodePool, check_backend, open_pool
 from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
 from awda_bench.harness.episode_specs import EvalProtocol, build_episode_specs, make_protocol
 from awda_bench.harness.methods import MethodSpec, SnapshotRef, get_method, select_snapshots
@@ -27,7 +29,6 @@ from awda_bench.harness.worker_pool import (
     DEFAULT_ENV_FACTORY,
     Job,
     WorkerConfig,
-    WorkerPool,
     run_inline,
 )
 from awda_bench.suites import SUITES_DIR, Suite, load_suite
@@ -74,7 +75,11 @@ class SweepConfig:
     seed: int = 0
     """Base seed of the episode seeds."""
     workers: int = 1
-    """Worker processes (0: play in this process, no watchdog)."""
+    """Worker processes or Ray actors (0: play in this process, no watchdog; local backend only)."""
+    backend: str = BACKENDS[0]
+    """Where workers run: ``"local"`` processes or ``"ray"`` actors (see :mod:`.backends`)."""
+    ray_address: str | None = None
+    """Ray cluster to join (``--backend ray``); ``None`` starts a private local Ray instance."""
     tasks: tuple[int, ...] = ()
     """Restrict this invocation to these evaluated tasks (the protocol still covers all)."""
     episode_timeout_s: float = 600.0
@@ -147,6 +152,7 @@ def prepare_sweep(config: SweepConfig) -> SweepPlan:
         specs = [s for s in specs if s.task in config.tasks]
     if config.workers < 0:
         raise UsageError(f"--workers must be >= 0 (got {config.workers})")
+    check_backend(config.backend, config.workers, config.ray_address)
     if config.episode_timeout_s <= 0:
         raise UsageError(f"--episode-timeout must be positive (got {config.episode_timeout_s})")
     method = get_method(config.method)
@@ -160,7 +166,26 @@ def run_sweep(config: SweepConfig) -> SweepResult:
     """Run every pending episode of the sweep, recording each as it arrives."""
     plan = prepare_sweep(config)
     fingerprint = plan.protocol.fingerprint
-    with ResultsStore(config.out, create=True) as store:
+    worker_config = WorkerConfig(
+        suite_name=plan.suite.name,
+        suites_dir=str(config.suites_dir),
+        env_factory=config.env_factory,
+        episode_timeout_s=config.episode_timeout_s,
+    )
+    t0 = time.perf_counter()
+    # the pool first: a Ray cluster that cannot be reached is refused before the store is touched
+    pool_context: AbstractContextManager[EpisodePool | None] = (
+        open_pool(
+            config.backend,
+            worker_config,
+            config.workers,
+            plan.suite,
+            ray_address=config.ray_address,
+        )
+        if config.workers
+        else nullcontext(None)
+    )
+    with pool_context as pool, ResultsStore(config.out, create=True) as store:
         store.check_protocol(plan.protocol)
         store.plan(
             plan.protocol,
@@ -216,19 +241,11 @@ def run_sweep(config: SweepConfig) -> SweepResult:
             bar.set_postfix(success=f"{rate:.2f}", errors=counts["errors"], refresh=False)
             bar.update(1)
 
-        worker_config = WorkerConfig(
-            suite_name=plan.suite.name,
-            suites_dir=str(config.suites_dir),
-            env_factory=config.env_factory,
-            episode_timeout_s=config.episode_timeout_s,
-        )
-        t0 = time.perf_counter()
         respawns, startup = 0, 0.0
         try:
-            if pending and config.workers == 0:
+            if pending and pool is None:
                 run_inline(pending, worker_config, on_result)
-            elif pending:
-                pool = WorkerPool(worker_config, config.workers, plan.suite)
+            elif pending and pool is not None:
                 pool.run(pending, on_result)
                 respawns, startup = pool.respawns, pool.startup_s
         finally:

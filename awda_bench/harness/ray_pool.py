@@ -1,0 +1,359 @@
+"""Episode workers as Ray actors: the local :class:`~awda_bench.harness.worker_pool.WorkerPool`'s
+interface (jobs in, records streamed to a callback on the driver) on one machine or a cluster.
+
+::
+
+    driver (the only store writer)                 actor k (num_cpus=1, OMP_NUM_THREADS=1)
+      ray.init(address) --- local instance, or a cluster started with `ray start --head`
+      EpisodeActor.remote(config) -------------->   holds nothing yet
+      start() --------------------------------->   executor = EpisodeExecutor(config): one env per
+            <------------- ("ready", pid, node)      env id, reused; policy cached per snapshot
+      play(Job) ------------------------------->   record = executor.play(job)
+            <------------------------- EpisodeRecord  (status ok, or error + traceback)
+      ... the next job is sent before the record is stored: the actor plays while we write
+      watchdog: a job older than episode_timeout_s -> ray.kill(actor), error record, respawn
+      actor or its node lost mid-episode -> the job is queued again (at most
+                                            LOST_WORKER_RETRIES times), a new actor is started
+
+Differences from the local pool, and why:
+
+- A worker lost mid-episode (killed process, lost node) re-queues the episode instead of recording
+  an error: on a cluster losing a node is not the episode's fault. An episode that takes its worker
+  down :data:`LOST_WORKER_RETRIES` + 1 times (a simulator that segfaults on that scene) is recorded
+  as an error, so a sweep always ends. Every episode is recorded exactly once per invocation: a
+  job's record comes either from the actor that finished it or from the driver (watchdog, retries
+  spent), never both, because an actor is killed before its job is re-queued or recorded.
+- An actor that Ray cannot place (a cluster with fewer free CPUs than ``--workers``) waits; the
+  sweep stops with :class:`~awda_bench.harness.worker_pool.WorkerStartError` only when *no* actor
+  has built its env within ``start_timeout_s``.
+
+Ray is an optional extra (``pip install -e '.[ray]'``); without it :func:`require_ray` raises a
+one-line :class:`~awda_bench.errors.MissingExtraError`.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import socket
+import sys
+import time
+import traceback
+from collections import Counter, deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from types import ModuleType
+from typing import Any
+
+from awda_bench.errors import MissingExtraError, UsageError
+from awda_bench.harness.episode_record import EpisodeRecord
+from awda_bench.harness.worker_pool import (
+    EpisodeExecutor,
+    Job,
+    WorkerConfig,
+    WorkerStartError,
+    error_record,
+)
+from awda_bench.suites import Suite
+
+RAY_INSTALL_HINT = "pip install -e '.[ray]'"
+"""How to install the extra (printed when Ray is missing)."""
+
+LOST_WORKER_RETRIES = 2
+"""An episode whose worker is lost is queued again at most this many times, then recorded as an
+error (the local pool records it at once)."""
+
+LOCAL_OBJECT_STORE_BYTES = 128 * 1024**2
+"""Object store of a local Ray instance [bytes]: only records travel through it (a few kB each);
+Ray's default (30 % of memory) would reserve shared memory for nothing."""
+
+CLOSE_TIMEOUT_S = 30.0
+"""Time actors get to close their envs at the end of a run before they are killed [s]."""
+
+_THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+
+def require_ray() -> ModuleType:
+    """The ``ray`` module; a one-line :class:`MissingExtraError` with the install hint if absent."""
+    try:
+        import ray
+    except ImportError as exc:
+        raise MissingExtraError(
+            f"--backend ray needs Ray, which is not installed: {RAY_INSTALL_HINT} "
+            "(or use --backend local)"
+        ) from exc
+    return ray
+
+
+class EpisodeActor:
+    """What one Ray actor holds: the same :class:`EpisodeExecutor` a local worker process holds.
+
+    Built with the driver's ``sys.path`` so it imports what the driver can (as a spawned local
+    worker does); on a cluster every node needs the project at the same path.
+    """
+
+    def __init__(self, config: WorkerConfig, sys_path: Sequence[str]) -> None:
+        missing = [p for p in sys_path if p and p not in sys.path and os.path.isdir(p)]
+        sys.path[:0] = missing
+        for name in _THREAD_VARS:
+            os.environ[name] = "1"  # before torch/numpy are imported by the env or the policy
+        self._config = config
+        self._executor: EpisodeExecutor | None = None
+
+    def start(self) -> tuple[str, Any, str]:
+        """Build the envs: ``("ready", pid, host)``, or ``("fatal", message, traceback)``."""
+        try:
+            self._executor = EpisodeExecutor(self._config)
+        except BaseException as exc:  # reported to the driver, which stops the sweep
+            return ("fatal", f"{type(exc).__name__}: {exc}", traceback.format_exc())
+        return ("ready", os.getpid(), socket.gethostname())
+
+    def play(self, job: Job) -> EpisodeRecord:
+        assert self._executor is not None, "start() first"
+        return self._executor.play(job)
+
+    def close(self) -> None:
+        if self._executor is not None:
+            self._executor.close()
+            self._executor = None
+
+
+@dataclass
+class _Slot:
+    """One actor as the driver tracks it."""
+
+    handle: Any
+    """The actor handle."""
+    ref: Any
+    """The call in flight (``start`` or ``play``), an ``ObjectRef``; ``None`` when idle."""
+    since: float
+    """When the call in flight was made (``time.monotonic()``) [s]."""
+    first_generation: bool
+    """Started with the pool (counts towards :attr:`RayWorkerPool.startup_s`)."""
+    ready: bool = False
+    """``start`` returned: the actor holds its envs."""
+    job: Job | None = None
+    """The job being played."""
+    pid: int | None = None
+    """The actor's process id (once ready)."""
+
+
+class RayWorkerPool:
+    """Run jobs on ``workers`` Ray actors, calling ``on_result`` on the driver as records arrive.
+
+    ``address=None`` starts a private local Ray instance (``ray.init(address="local")``) with
+    ``max(workers, cpu_count)`` CPUs; otherwise it joins the cluster at ``address`` (``"auto"``,
+    ``"HOST:6379"``, ``"ray://HOST:10001"``). If Ray is already initialized in this process it is
+    used as it is. A Ray instance the pool started is shut down by :meth:`close`.
+    """
+
+    def __init__(
+        self, config: WorkerConfig, workers: int, suite: Suite, *, address: str | None = None
+    ) -> None:
+        if workers < 1:
+            raise ValueError("workers must be >= 1")
+        self._ray = require_ray()
+        self.config = config
+        self.workers = workers
+        self.suite = suite
+        self.address = address
+        self.respawns = 0
+        """Actors replaced after a hang or a loss."""
+        self.requeued = 0
+        """Jobs queued again because their actor was lost."""
+        self.connect_s = 0.0
+        """Time to start or join Ray [s] (part of :attr:`startup_s`)."""
+        self.startup_s = 0.0
+        """Connecting plus the time until every first-generation actor was ready [s]."""
+        self._owns_ray = False
+        self._actor_cls: Any = None
+        self._slots: list[_Slot] = []
+        self._connect()
+
+    # --- Ray instance --------------------------------------------------------------------------
+
+    def _connect(self) -> None:
+        ray = self._ray
+        t0 = time.perf_counter()
+        if not ray.is_initialized():
+            kwargs: dict[str, Any] = dict(logging_level=logging.WARNING, log_to_driver=True)
+            if self.address is None:
+                kwargs.update(
+                    address="local",
+                    num_cpus=max(self.workers, os.cpu_count() or 1),
+                    include_dashboard=False,
+                    object_store_memory=LOCAL_OBJECT_STORE_BYTES,
+                )
+            else:
+                kwargs.update(address=self.address)
+            try:
+                ray.init(**kwargs)
+            except (ConnectionError, ValueError, RuntimeError) as exc:
+                where = "a local Ray instance" if self.address is None else self.address
+                first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
+                raise UsageError(
+                    f"cannot start or join Ray at {where}: {first} "
+                    "(a cluster is started with `ray start --head`)"
+                ) from exc
+            self._owns_ray = True
+        self._actor_cls = ray.remote(num_cpus=1, max_restarts=0)(EpisodeActor)
+        self.connect_s = time.perf_counter() - t0
+
+    def close(self) -> None:
+        """Shut down the Ray instance this pool started (a joined cluster stays up)."""
+        if self._owns_ray and self._ray.is_initialized():
+            self._ray.shutdown()
+        self._owns_ray = False
+
+    def __enter__(self) -> RayWorkerPool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # --- scheduling ----------------------------------------------------------------------------
+
+    def _family(self, job: Job) -> str:
+        return self.suite.task(job.spec.task).family
+
+    def _spawn(self, first_generation: bool) -> _Slot:
+        handle = self._actor_cls.remote(self.config, list(sys.path))
+        return _Slot(handle, handle.start.remote(), time.monotonic(), first_generation)
+
+    def _respawn(self, slot: _Slot) -> _Slot:
+        self._ray.kill(slot.handle, no_restart=True)
+        self.respawns += 1
+        return self._spawn(first_generation=False)
+
+    def _dispatch(self, slot: _Slot, queue: deque[Job]) -> None:
+        """Hand ``slot`` the next queued job if it is ready and idle."""
+        if slot.ready and slot.job is None and queue:
+            slot.job = queue.popleft()
+            slot.since = time.monotonic()
+            slot.ref = slot.handle.play.remote(slot.job)
+
+    def _lost(self, slot: _Slot, message: str) -> EpisodeRecord:
+        assert slot.job is not None
+        return error_record(
+            slot.job, self._family(slot.job), message, time.monotonic() - slot.since
+        )
+
+    def run(self, jobs: Sequence[Job], on_result: Callable[[EpisodeRecord], None]) -> None:
+        """Play every job once; ``on_result`` gets exactly one record per job, in arrival order."""
+        ray = self._ray
+        t_start = time.monotonic() - self.connect_s
+        queue: deque[Job] = deque(jobs)
+        losses: Counter[int] = Counter()  # by id(job): a lost job is queued again as is
+        slots = [self._spawn(first_generation=True) for _ in range(min(self.workers, len(jobs)))]
+        self._slots = slots
+        waiting_first = len(slots)
+        timeout_episode = self.config.episode_timeout_s
+        try:
+            while queue or any(s.job is not None for s in slots):
+                for slot in slots:
+                    self._dispatch(slot, queue)
+                now = time.monotonic()
+                deadlines = [
+                    s.since + (timeout_episode if s.ready else self.config.start_timeout_s)
+                    for s in slots
+                    if s.ref is not None
+                ]
+                timeout = max(0.0, min(min(deadlines, default=now + 1.0) - now, 1.0))
+                in_flight = [s.ref for s in slots if s.ref is not None]
+                done, _ = ray.wait(in_flight, num_returns=1, timeout=timeout)
+                for ref in done:
+                    index = next(i for i, s in enumerate(slots) if s.ref is ref)
+                    slot = slots[index]
+                    slot.ref = None
+                    was_ready = slot.ready
+                    slots[index] = self._receive(slot, ref, queue, losses, on_result)
+                    if waiting_first and slot.first_generation and not was_ready and slot.ready:
+                        waiting_first -= 1
+                        if not waiting_first:
+                            self.startup_s = time.monotonic() - t_start
+                now = time.monotonic()
+                starting = [s for s in slots if not s.ready]
+                if starting and len(starting) == len(slots):
+                    oldest = min(s.since for s in starting)
+                    if now > oldest + self.config.start_timeout_s:
+                        raise WorkerStartError(
+                            f"no Ray actor built its env within "
+                            f"{self.config.start_timeout_s:.0f} s (cluster resources: "
+                            f"{ray.available_resources()}); check `python -m awda_bench doctor` "
+                            "on the nodes"
+                        )
+                for i, slot in enumerate(slots):
+                    if slot.job is not None and now > slot.since + timeout_episode:
+                        on_result(
+                            self._lost(
+                                slot,
+                                f"watchdog: episode exceeded {timeout_episode:g} s; worker killed",
+                            )
+                        )
+                        slots[i] = self._respawn(slot)
+        finally:
+            if waiting_first:
+                self.startup_s = time.monotonic() - t_start
+            self._stop(slots)
+
+    def _receive(
+        self,
+        slot: _Slot,
+        ref: Any,
+        queue: deque[Job],
+        losses: Counter[int],
+        on_result: Callable[[EpisodeRecord], None],
+    ) -> _Slot:
+        exceptions = self._ray.exceptions
+        try:
+            value = self._ray.get(ref)
+        except exceptions.RayTaskError as exc:
+            # the call raised past EpisodeExecutor.play's own handler (SystemExit, ...): keep it
+            if slot.job is None:
+                raise WorkerStartError(f"a Ray actor failed while starting: {exc}") from exc
+            on_result(self._lost(slot, f"worker raised outside the episode:\n{exc}"))
+            return self._respawn(slot)
+        except exceptions.RayError as exc:  # actor process or node lost
+            if slot.job is None:
+                raise WorkerStartError(
+                    f"a Ray actor died before building its env: {type(exc).__name__}"
+                ) from exc
+            job = slot.job
+            losses[id(job)] += 1
+            if losses[id(job)] > LOST_WORKER_RETRIES:
+                on_result(
+                    self._lost(
+                        slot,
+                        f"worker lost {losses[id(job)]} times during this episode "
+                        f"(last: {type(exc).__name__})",
+                    )
+                )
+            else:
+                queue.appendleft(job)
+                self.requeued += 1
+            return self._respawn(slot)
+        if not slot.ready:
+            if value[0] == "fatal":
+                raise WorkerStartError(f"a worker could not build the env: {value[1]}")
+            slot.ready, slot.pid = True, int(value[1])
+            self._dispatch(slot, queue)
+            return slot
+        # hand the actor its next job before storing this result: it plays while we write
+        slot.job = None
+        self._dispatch(slot, queue)
+        on_result(value)
+        return slot
+
+    def _stop(self, slots: list[_Slot]) -> None:
+        """Let ready, idle actors close their envs; kill them all."""
+        ray = self._ray
+        closing = [s.handle.close.remote() for s in slots if s.ready and s.job is None]
+        if closing:
+            ray.wait(closing, num_returns=len(closing), timeout=CLOSE_TIMEOUT_S)
+        for slot in slots:
+            ray.kill(slot.handle, no_restart=True)
+
+    @property
+    def pids(self) -> list[int]:
+        """Process ids of the ready actors of the current :meth:`run` (tests, fault drills)."""
+        return [s.pid for s in self._slots if s.ready and s.pid is not None]

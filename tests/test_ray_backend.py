@@ -1,0 +1,279 @@
+"""The Ray backend (awda_bench/harness/ray_pool.py, backends.py) on the fake suite, on a private
+local Ray instance: same outcomes and tables as the local pool, every planned episode recorded once
+when an actor is killed, the watchdog, resume after the driver is killed, and the install hint
+when Ray is missing. Every test starts (and stops) its own Ray instance: ~3-5 s each."""
+
+from __future__ import annotations
+
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from harness_fakes import write_fake_suite
+
+from awda_bench.cli import main
+from awda_bench.harness.episode_record import STATUS_ERROR, STATUS_OK, EpisodeRecord
+from awda_bench.harness.episode_specs import build_episode_specs, make_protocol
+from awda_bench.harness.methods import BUILTIN_SNAPSHOT, MethodSpec, SnapshotRef
+from awda_bench.harness.results_store import STORE_NAME
+from awda_bench.harness.worker_pool import Job, WorkerConfig, WorkerStartError
+from awda_bench.suites import load_suite
+
+if os.environ.get("CI"):
+    import ray  # tox installs the extra: CI must exercise the Ray backend, never skip it
+else:
+    ray = pytest.importorskip("ray", reason="the 'ray' extra is not installed")
+
+from awda_bench.harness.ray_pool import LOST_WORKER_RETRIES, RayWorkerPool  # noqa: E402
+
+TESTS = Path(__file__).resolve().parent
+FAKES = "harness_fakes"
+BUILTIN = SnapshotRef(sha256=BUILTIN_SNAPSHOT, name=BUILTIN_SNAPSHOT, path=None, order=0)
+
+
+@pytest.fixture
+def suites(tmp_path: Path) -> Path:
+    d = tmp_path / "tasks"
+    d.mkdir()
+    write_fake_suite(d)
+    return d
+
+
+@pytest.fixture(autouse=True)
+def no_ray_left_running():
+    yield
+    assert not ray.is_initialized(), "a test left Ray running"
+
+
+def _run(suites: Path, out: Path, *extra: str) -> int:
+    return main(
+        [
+            "run",
+            "--suite",
+            "fake",
+            "--tasks-dir",
+            str(suites),
+            "--out",
+            str(out),
+            "--no-progress",
+            *extra,
+        ]
+    )
+
+
+def _outcomes(out: Path) -> list[tuple]:
+    db = sqlite3.connect(out / STORE_NAME)
+    try:
+        return db.execute(
+            "SELECT method, snapshot, task, episode, seed, demo_seed, status, success_once, "
+            "success_at_end, reached, grasped, steps, waypoints, attempts FROM episodes "
+            "ORDER BY task, episode"
+        ).fetchall()
+    finally:
+        db.close()
+
+
+def _jobs(suites: Path, method: str, episodes: int) -> tuple[list[Job], WorkerConfig]:
+    suite = load_suite("fake", suites)
+    specs = build_episode_specs(suite, make_protocol(suite, episodes=episodes, base_seed=0))
+    spec = MethodSpec(method, f"{FAKES}:{method}")
+    config = WorkerConfig(suite_name="fake", suites_dir=str(suites), episode_timeout_s=60.0)
+    return [Job(spec=s, method=spec, snapshot=BUILTIN) for s in specs], config
+
+
+def _keys(records: list[EpisodeRecord]) -> list[tuple[int, int]]:
+    return sorted((r.task, r.episode) for r in records)
+
+
+def _without_provenance(text: str) -> str:
+    return "\n".join(
+        line for line in text.splitlines() if not line.startswith(("Store:", "Generated:"))
+    )
+
+
+def test_ray_and_local_backends_give_identical_outcomes_and_tables(
+    tmp_path: Path, suites: Path, capsys
+) -> None:
+    """The CI check of the Ray backend: 4 episodes (2 held-out tasks x 2) on 2 actors."""
+    common = ("--method", f"{FAKES}:SkillPolicy", "--episodes", "2", "--workers", "2")
+    assert _run(suites, tmp_path / "local", *common, "--backend", "local") == 0
+    assert _run(suites, tmp_path / "ray", *common, "--backend", "ray") == 0
+    assert "4 episodes planned, 0 already done, 4 played (0 errors)" in capsys.readouterr().out
+    local, on_ray = _outcomes(tmp_path / "local"), _outcomes(tmp_path / "ray")
+    assert len(local) == 4 and {r[6] for r in local} == {STATUS_OK}
+    assert 0 < sum(r[7] for r in local) < 4  # outcomes differ by seed: a real comparison
+    assert on_ray == local
+    for name in ("local", "ray"):
+        assert (
+            main(["report", "--runs", str(tmp_path / name), "--out", str(tmp_path / f"rep-{name}")])
+            == 0
+        )
+    local_files = sorted(p.name for p in (tmp_path / "rep-local").iterdir())
+    assert {"s3.md", "s4.csv", "per_snapshot.csv", "counts.csv", "summary.json"} <= set(local_files)
+    assert sorted(p.name for p in (tmp_path / "rep-ray").iterdir()) == local_files
+    for name in local_files:
+        texts = [(tmp_path / rep / name).read_text() for rep in ("rep-local", "rep-ray")]
+        if name == "report.md":  # its header names the store's path and the time
+            texts = [_without_provenance(t) for t in texts]
+        assert texts[0] == texts[1], name
+    # resume keeps its meaning: nothing left to play
+    assert _run(suites, tmp_path / "ray", *common, "--backend", "ray") == 0
+    assert "4 already done, 0 played" in capsys.readouterr().out
+
+
+def test_an_actor_killed_by_pid_mid_sweep_loses_no_episode_and_repeats_none(
+    suites: Path, monkeypatch
+) -> None:
+    monkeypatch.setenv("AWDA_FAKE_SLEEP_S", "0.05")  # 6 steps: ~0.3 s per episode
+    jobs, config = _jobs(suites, "SlowPolicy", episodes=5)
+    records: list[EpisodeRecord] = []
+    killed: list[int] = []
+    with RayWorkerPool(config, 2, load_suite("fake", suites)) as pool:
+
+        def on_result(record: EpisodeRecord) -> None:
+            records.append(record)
+            if not killed:  # both actors hold a job now: the next one was sent before this call
+                killed.append(pool.pids[0])
+                os.kill(killed[0], signal.SIGKILL)
+
+        pool.run(jobs, on_result)
+    assert killed and killed[0] not in pool.pids
+    assert _keys(records) == sorted((j.spec.task, j.spec.episode) for j in jobs)  # once each
+    assert {r.status for r in records} == {STATUS_OK}
+    assert (pool.requeued, pool.respawns) == (1, 1)
+
+
+def test_an_episode_that_kills_its_worker_every_time_ends_as_one_error(suites: Path) -> None:
+    jobs, config = _jobs(suites, "CrashingPolicy", episodes=3)  # dies on episode 1 of each task
+    jobs = [j for j in jobs if j.spec.task == 3]
+    records: list[EpisodeRecord] = []
+    with RayWorkerPool(config, 1, load_suite("fake", suites)) as pool:
+        pool.run(jobs, records.append)
+    assert _keys(records) == [(3, 0), (3, 1), (3, 2)]
+    (error,) = [r for r in records if r.status == STATUS_ERROR]
+    assert error.episode == 1
+    assert error.error is not None
+    assert error.error.startswith(f"worker lost {LOST_WORKER_RETRIES + 1} times")
+    assert pool.requeued == LOST_WORKER_RETRIES
+    assert pool.respawns == LOST_WORKER_RETRIES + 1
+
+
+@pytest.mark.slow
+def test_watchdog_ends_a_hung_episode_on_ray(tmp_path: Path, suites: Path) -> None:
+    out = tmp_path / "run"
+    extra = ("--method", f"{FAKES}:HangingPolicy", "--episodes", "3", "--task", "2")
+    code = _run(suites, out, *extra, "--workers", "2", "--backend", "ray", "--episode-timeout", "3")
+    assert code == 1  # the hung episode is an error, kept apart from failures
+    rows = _outcomes(out)
+    assert [(r[2], r[3], r[6]) for r in rows] == [
+        (2, 0, STATUS_OK),
+        (2, 1, STATUS_ERROR),
+        (2, 2, STATUS_OK),
+    ]
+    db = sqlite3.connect(out / STORE_NAME)
+    (message,) = db.execute("SELECT error FROM episodes WHERE status='error'").fetchone()
+    db.close()
+    assert message.startswith("watchdog: episode exceeded 3 s")
+
+
+def test_an_actor_that_cannot_build_its_env_stops_the_sweep(tmp_path: Path, suites: Path) -> None:
+    write_fake_suite(suites, name="broken", env_id='"harness_fakes:AWDA-Missing-v0"')
+    suite = load_suite("broken", suites)
+    config = WorkerConfig(suite_name="broken", suites_dir=str(suites))
+    job = Job(
+        spec=build_episode_specs(suite, make_protocol(suite, episodes=1, base_seed=0))[0],
+        method=MethodSpec("fake", f"{FAKES}:SkillPolicy"),
+        snapshot=BUILTIN,
+    )
+    with (
+        RayWorkerPool(config, 1, suite) as pool,
+        pytest.raises(WorkerStartError, match="could not build the env"),
+    ):
+        pool.run([job], lambda record: None)
+
+
+def _recorded(store: Path) -> int:
+    if not store.exists():
+        return 0
+    db = sqlite3.connect(store)
+    try:
+        if not db.execute("SELECT 1 FROM sqlite_master WHERE name='episodes'").fetchone():
+            return 0
+        return db.execute("SELECT COUNT(*) FROM episodes").fetchone()[0]
+    finally:
+        db.close()
+
+
+@pytest.mark.slow
+def test_driver_killed_mid_sweep_then_rerun_resumes(tmp_path: Path, suites: Path) -> None:
+    out = tmp_path / "run"
+    command = [
+        sys.executable,
+        "-m",
+        "awda_bench",
+        "run",
+        "--suite",
+        "fake",
+        "--tasks-dir",
+        str(suites),
+        "--method",
+        f"{FAKES}:SlowPolicy",
+        "--episodes",
+        "6",
+        "--workers",
+        "2",
+        "--backend",
+        "ray",
+        "--no-progress",
+        "--out",
+        str(out),
+    ]
+    env = {**os.environ, "PYTHONPATH": str(TESTS), "AWDA_FAKE_SLEEP_S": "0.1"}
+    proc = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.monotonic() + 180
+    try:
+        while time.monotonic() < deadline and _recorded(out / STORE_NAME) < 3:
+            time.sleep(0.2)
+        proc.send_signal(signal.SIGKILL)
+    finally:
+        proc.wait(timeout=30)
+    partial = _recorded(out / STORE_NAME)
+    assert 3 <= partial < 12
+    rerun = subprocess.run(command, env=env, capture_output=True, text=True, timeout=300)
+    assert rerun.returncode == 0, rerun.stderr
+    assert f"12 episodes planned, {partial} already done, {12 - partial} played" in rerun.stdout
+    rows = _outcomes(out)
+    assert [(r[2], r[3]) for r in rows] == [(t, e) for t in (2, 3) for e in range(6)]
+    assert {(r[6], r[13]) for r in rows} == {(STATUS_OK, 1)}  # each episode played once
+
+
+def test_without_ray_the_ray_backend_is_refused_with_an_install_hint(
+    tmp_path: Path, suites: Path, monkeypatch, capsys
+) -> None:
+    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError
+    out = tmp_path / "run"
+    assert _run(suites, out, "--method", f"{FAKES}:SkillPolicy", "--backend", "ray") == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert err.startswith("error: --backend ray needs Ray") and "pip install -e '.[ray]'" in err
+    assert not out.exists()
+
+
+def test_bad_backend_options_are_one_line_errors(tmp_path: Path, suites: Path, capsys) -> None:
+    out = tmp_path / "run"
+    cases = [
+        (["--ray-address", "127.0.0.1:6379"], "--ray-address needs --backend ray"),
+        (["--backend", "ray", "--workers", "0"], "--backend ray needs --workers >= 1"),
+    ]
+    for extra, message in cases:
+        assert _run(suites, out, "--method", f"{FAKES}:SkillPolicy", *extra) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("error: ") and err.count("\n") == 1 and message in err, err
+    assert not out.exists()
+    with pytest.raises(SystemExit):
+        _run(suites, out, "--backend", "dask")
