@@ -11,5 +11,6 @@ COMMANDS: tuple[str, ...] = (
     "demo",
     "describe",
     "collect",
+    "dataset",
     "replay",
 )

@@ -1,0 +1,380 @@
+"""Torch datasets over a collected DATA_DIR, in the batch formats :mod:`awda_bench.models` documents.
+
+:class:`AwdaPairDataset` (``AwdaNet.compute_loss``), one sample per pair::
+
+    task-driven (head 0): every demonstrator episode d of task t  x  every agent episode a of t
+        "demo"        (demo_frames, 3, H, W)  d's frames at round(linspace(0, T_d, demo_frames)):
+                                              first and last included
+        "first_frame" (3, H, W)               a's frame 0
+        "trajectory"  (P, 3 + k)              a's TCP xyz (world frame [m]) at P points evenly
+                                              spaced in time over states 0..T_a (linear), plus
+                                              the k mined attributes (nearest step, 0/1);
+                                              trajectory[0] is the TCP at the first frame
+        "head"        ()  int64               0
+    synthesized (head 1): each synthesized episode paired with itself (demo = its own frames)
+
+Pairs never cross tasks (agent and demonstrator scenes of one task differ: their seeds are hashed
+with different roles) and never come from a ``test`` collection unless ``allow_test=True`` (a
+validation set). MOSAIC's leave-one-family-out training set is ``exclude_families=("door",)``.
+
+:class:`TosviDataset` (``TosviNet.compute_loss``), one sample per agent step ``t``::
+
+    "demo"    (demo_frames, 3, H, W)   a demonstrator episode of the same task (fixed per sample:
+                                       index (7919 * a + t) mod D among the task's D demos)
+    "frames"  (frame_stack, 3, H, W)   agent frames t-5 .. t (indices below 0 repeat frame 0)
+    "actions" (frame_stack, 4)         the actions taken at those frames (a_t is the target)
+    "depth"   (frame_stack, 1, Hd, Wd) wrist depth [m] at those frames (``with_depth=True``)
+
+Images are RGB float32 in [0, 1], channels first; resized with OpenCV (area) when ``image_size``
+differs from the collected size. Files are opened lazily, once per process (DataLoader workers
+each open their own handles).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import torch
+
+from awda_bench.data.collect import MANIFEST
+from awda_bench.data.config import ROLE_AGENT, ROLE_DEMONSTRATOR, ROLE_SYNTHESIZED
+from awda_bench.data.trajectory_file import decode_jpeg, load_unit_json
+from awda_bench.errors import CorruptFileError, UsageError
+
+
+@dataclass(frozen=True)
+class EpisodeRef:
+    """Where one kept episode lives and what it is."""
+
+    role: str
+    task: int
+    family: str
+    file: Path
+    """The unit's ``.h5`` file."""
+    traj: str
+    """Group name inside it (``traj_<i>``)."""
+    steps: int
+    """T: actions in the episode (T + 1 frames)."""
+    meta: dict[str, Any]
+    """The episode's JSON entry."""
+
+
+class CollectedData:
+    """Read-only view of a DATA_DIR written by ``collect``."""
+
+    def __init__(self, root: Path | str, *, allow_incomplete: bool = False) -> None:
+        import json
+
+        self.root = Path(root)
+        path = self.root / MANIFEST
+        if not path.is_file():
+            raise UsageError(
+                f"{self.root} holds no {MANIFEST}: not a collect directory; "
+                "create one with python -m awda_bench collect"
+            )
+        try:
+            self.manifest: dict[str, Any] = json.loads(path.read_text())
+            units = self.manifest["units"]
+        except (OSError, ValueError, KeyError) as exc:
+            raise CorruptFileError(
+                f"{path} is unreadable ({exc}); re-run the collect command that made it"
+            ) from exc
+        if not self.manifest.get("complete") and not allow_incomplete:
+            raise UsageError(
+                f"the collection in {self.root} is incomplete; re-run its collect command to "
+                "finish it (or pass allow_incomplete=True)"
+            )
+        self.episodes: list[EpisodeRef] = []
+        for unit in units:
+            if not unit.get("complete"):
+                continue
+            h5_path = self.root / unit["file"]
+            payload = load_unit_json(h5_path.with_suffix(".json"))
+            for episode in payload["episodes"]:
+                self.episodes.append(
+                    EpisodeRef(
+                        role=unit["role"],
+                        task=int(unit["task"]),
+                        family=unit["family"],
+                        file=h5_path,
+                        traj=f"traj_{episode['episode_id']}",
+                        steps=int(episode["elapsed_steps"]),
+                        meta=episode,
+                    )
+                )
+        self._files: dict[Path, h5py.File] = {}
+        self._pid = os.getpid()
+
+    @property
+    def split(self) -> str:
+        return str(self.manifest.get("definition", {}).get("split", ""))
+
+    def select(
+        self,
+        role: str,
+        *,
+        tasks: Iterable[int] | None = None,
+        families: Iterable[str] | None = None,
+        exclude_families: Iterable[str] = (),
+    ) -> list[EpisodeRef]:
+        task_set = None if tasks is None else set(tasks)
+        family_set = None if families is None else set(families)
+        excluded = set(exclude_families)
+        return [
+            e
+            for e in self.episodes
+            if e.role == role
+            and (task_set is None or e.task in task_set)
+            and (family_set is None or e.family in family_set)
+            and e.family not in excluded
+        ]
+
+    def group(self, ref: EpisodeRef) -> h5py.Group:
+        if os.getpid() != self._pid:  # a forked DataLoader worker: never share HDF5 handles
+            self._files, self._pid = {}, os.getpid()
+        handle = self._files.get(ref.file)
+        if handle is None:
+            try:
+                handle = h5py.File(ref.file, "r")
+            except OSError as exc:
+                raise CorruptFileError(
+                    f"{ref.file} is unreadable ({exc}); delete it (and its .json) and re-run the "
+                    "collect command to record that unit again"
+                ) from exc
+            self._files[ref.file] = handle
+        try:
+            return handle[ref.traj]
+        except KeyError as exc:
+            raise CorruptFileError(
+                f"{ref.file} lacks {ref.traj}; delete it and re-run the collect command"
+            ) from exc
+
+    def _read(self, ref: EpisodeRef, key: str, index: Any = ()) -> np.ndarray:
+        try:
+            return np.asarray(self.group(ref)[key][index])
+        except (KeyError, OSError, ValueError) as exc:
+            raise CorruptFileError(
+                f"{ref.file}:{ref.traj}/{key} is unreadable ({exc}); delete the file and re-run "
+                "the collect command"
+            ) from exc
+
+    def frames(self, ref: EpisodeRef, indices: Iterable[int]) -> np.ndarray:
+        """(k, H, W, 3) uint8 RGB third-person frames at state indices."""
+        dataset = "obs/sensor_data/third_person/rgb_jpeg"
+        out = []
+        for i in indices:
+            try:
+                out.append(decode_jpeg(self._read(ref, dataset, int(i))))
+            except ValueError as exc:
+                raise CorruptFileError(
+                    f"{ref.file}:{ref.traj} frame {i} is not a JPEG ({exc}); delete the file and "
+                    "re-run the collect command"
+                ) from exc
+        return np.stack(out)
+
+    def tcp_pos(self, ref: EpisodeRef) -> np.ndarray:
+        """(T + 1, 3) TCP positions, world frame [m]."""
+        return self._read(ref, "obs/extra/tcp_pose")[:, :3].astype(np.float64)
+
+    def attributes(self, ref: EpisodeRef, names: Iterable[str]) -> np.ndarray:
+        """(T, k) mined attributes as floats."""
+        cols = [self._read(ref, f"attributes/{n}").astype(np.float32) for n in names]
+        return np.stack(cols, axis=1) if cols else np.zeros((ref.steps, 0), np.float32)
+
+    def actions(self, ref: EpisodeRef) -> np.ndarray:
+        return self._read(ref, "actions").astype(np.float32)
+
+    def depth_m(self, ref: EpisodeRef, indices: Iterable[int]) -> np.ndarray:
+        """(k, Hd, Wd, 1) float32 wrist depth [m] (agent roles only)."""
+        idx = np.asarray(list(indices), dtype=np.int64)
+        unique, inverse = np.unique(idx, return_inverse=True)
+        mm = self._read(ref, "obs/sensor_data/wrist_depth/depth", unique)
+        return (mm[inverse].astype(np.float32) / 1000.0).reshape(len(idx), *mm.shape[1:])
+
+    def close(self) -> None:
+        for handle in self._files.values():
+            handle.close()
+        self._files.clear()
+
+
+def _to_tensor(frames: np.ndarray, size: tuple[int, int] | None) -> torch.Tensor:
+    """(k, H, W, 3) uint8 -> (k, 3, H', W') float32 in [0, 1]."""
+    if size is not None and tuple(frames.shape[1:3]) != tuple(size):
+        import cv2
+
+        frames = np.stack(
+            [cv2.resize(f, (size[1], size[0]), interpolation=cv2.INTER_AREA) for f in frames]
+        )
+    return torch.from_numpy(np.ascontiguousarray(frames)).permute(0, 3, 1, 2).float() / 255.0
+
+
+def demo_frame_indices(steps: int, count: int) -> np.ndarray:
+    """``count`` state indices over 0..steps, first and last included."""
+    return np.linspace(0, steps, count).round().astype(np.int64)
+
+
+def resample_trajectory(tcp: np.ndarray, attributes: np.ndarray, points: int) -> np.ndarray:
+    """(T+1, 3) positions and (T, k) attributes -> (points, 3 + k) (see the module docstring)."""
+    n = len(tcp)
+    s = np.linspace(0.0, n - 1, points)
+    xyz = np.stack([np.interp(s, np.arange(n), tcp[:, j]) for j in range(3)], axis=1)
+    if attributes.shape[1]:
+        full = np.concatenate([attributes, attributes[-1:]], axis=0)  # state T takes the last
+        flags = full[np.clip(np.round(s).astype(np.int64), 0, n - 1)]
+    else:
+        flags = np.zeros((points, 0))
+    return np.concatenate([xyz, flags], axis=1).astype(np.float32)
+
+
+def _check_split(data: CollectedData, allow_test: bool) -> None:
+    if data.split == "test" and not allow_test:
+        raise UsageError(
+            f"{data.root} is a test-split collection (held-out tasks): training never draws "
+            "from it; pass allow_test=True only for a validation set"
+        )
+
+
+class AwdaPairDataset:
+    """AWDA samples (module docstring); ``len`` = sum over tasks of agents x demos + synthesized."""
+
+    def __init__(
+        self,
+        data: CollectedData,
+        *,
+        demo_frames: int = 10,
+        trajectory_points: int = 50,
+        attributes: tuple[str, ...] = ("grasp",),
+        image_size: tuple[int, int] | None = None,
+        tasks: Iterable[int] | None = None,
+        families: Iterable[str] | None = None,
+        exclude_families: Iterable[str] = (),
+        include_synthesized: bool = True,
+        allow_test: bool = False,
+    ) -> None:
+        _check_split(data, allow_test)
+        if demo_frames < 2 or trajectory_points < 2:
+            raise UsageError("demo_frames and trajectory_points must be >= 2")
+        self.data = data
+        self.demo_frames = demo_frames
+        self.trajectory_points = trajectory_points
+        self.attributes = attributes
+        self.image_size = image_size
+        exclude = tuple(exclude_families)
+        pick = {"tasks": tasks, "families": families, "exclude_families": exclude}
+        agents = data.select(ROLE_AGENT, **pick)
+        demos = data.select(ROLE_DEMONSTRATOR, **pick)
+        self.pairs: list[tuple[EpisodeRef, EpisodeRef, int]] = []
+        by_task: dict[int, list[EpisodeRef]] = {}
+        for d in demos:
+            by_task.setdefault(d.task, []).append(d)
+        for a in agents:
+            for d in by_task.get(a.task, []):
+                self.pairs.append((a, d, 0))
+        if include_synthesized:
+            for s in data.select(ROLE_SYNTHESIZED, **pick):
+                self.pairs.append((s, s, 1))
+        if not self.pairs:
+            raise UsageError(
+                f"no AWDA pairs in {data.root} for this selection (needs agent and demonstrator "
+                "episodes of the same task, or synthesized ones)"
+            )
+
+    def __len__(self) -> int:
+        return len(self.pairs)
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        agent, demo, head = self.pairs[index]
+        demo_idx = demo_frame_indices(demo.steps, self.demo_frames)
+        trajectory = resample_trajectory(
+            self.data.tcp_pos(agent),
+            self.data.attributes(agent, self.attributes),
+            self.trajectory_points,
+        )
+        return {
+            "demo": _to_tensor(self.data.frames(demo, demo_idx), self.image_size),
+            "first_frame": _to_tensor(self.data.frames(agent, [0]), self.image_size)[0],
+            "trajectory": torch.from_numpy(trajectory),
+            "head": torch.tensor(head, dtype=torch.int64),
+        }
+
+
+class TosviDataset:
+    """T-OSVI samples (module docstring); ``len`` = total agent steps of the selection."""
+
+    def __init__(
+        self,
+        data: CollectedData,
+        *,
+        demo_frames: int = 10,
+        frame_stack: int = 6,
+        with_depth: bool = False,
+        image_size: tuple[int, int] | None = None,
+        depth_size: tuple[int, int] | None = None,
+        tasks: Iterable[int] | None = None,
+        families: Iterable[str] | None = None,
+        exclude_families: Iterable[str] = (),
+        include_synthesized: bool = False,
+        allow_test: bool = False,
+    ) -> None:
+        _check_split(data, allow_test)
+        if frame_stack < 2:
+            raise UsageError(f"frame_stack must be >= 2, got {frame_stack}")
+        self.data = data
+        self.demo_frames = demo_frames
+        self.frame_stack = frame_stack
+        self.with_depth = with_depth
+        self.image_size = image_size
+        self.depth_size = depth_size
+        exclude = tuple(exclude_families)
+        pick = {"tasks": tasks, "families": families, "exclude_families": exclude}
+        demos: dict[int, list[EpisodeRef]] = {}
+        for d in data.select(ROLE_DEMONSTRATOR, **pick):
+            demos.setdefault(d.task, []).append(d)
+        self.samples: list[tuple[EpisodeRef, EpisodeRef, int]] = []
+        for a_index, agent in enumerate(data.select(ROLE_AGENT, **pick)):
+            task_demos = demos.get(agent.task, [])
+            if not task_demos:
+                continue
+            for t in range(agent.steps):
+                demo = task_demos[(7919 * a_index + t) % len(task_demos)]
+                self.samples.append((agent, demo, t))
+        if include_synthesized:
+            for s in data.select(ROLE_SYNTHESIZED, **pick):
+                self.samples += [(s, s, t) for t in range(s.steps)]
+        if not self.samples:
+            raise UsageError(
+                f"no T-OSVI samples in {data.root} for this selection (needs agent and "
+                "demonstrator episodes of the same task)"
+            )
+
+    def __len__(self) -> int:
+        return len(self.samples)
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        agent, demo, t = self.samples[index]
+        stack = np.clip(np.arange(t - self.frame_stack + 1, t + 1), 0, None)
+        sample = {
+            "demo": _to_tensor(
+                self.data.frames(demo, demo_frame_indices(demo.steps, self.demo_frames)),
+                self.image_size,
+            ),
+            "frames": _to_tensor(self.data.frames(agent, stack), self.image_size),
+            "actions": torch.from_numpy(self.data.actions(agent)[stack]),
+        }
+        if self.with_depth:
+            depth = self.data.depth_m(agent, stack)[..., 0]  # (S, Hd, Wd)
+            if self.depth_size is not None and tuple(depth.shape[1:]) != tuple(self.depth_size):
+                import cv2
+
+                h, w = self.depth_size
+                depth = np.stack(
+                    [cv2.resize(d, (w, h), interpolation=cv2.INTER_NEAREST) for d in depth]
+                )
+            sample["depth"] = torch.from_numpy(np.ascontiguousarray(depth))[:, None]
+        return sample
