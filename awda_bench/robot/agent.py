@@ -63,6 +63,15 @@ class PandaAWDA(Panda):
     wrist_camera_size: tuple[int, int] = (128, 128)
     """Default (height, width) of the wrist depth image [px]."""
     wrist_camera_fov_rad: float = np.pi / 2
+    mink_arm_stiffness: float = 1e4
+    """Arm joint drive stiffness under ``pd_ee_delta_pos_mink`` [N m/rad] (10x the Panda's
+    default: with 1e3 the arm lagged its target ~2 control steps, and the proportional law
+    ``a = k (goal - tcp)`` overshot by 10 mm at k = 1; ``bench controller --fidelity``)."""
+    mink_arm_damping: float = 5e2
+    """Arm joint drive damping under ``pd_ee_delta_pos_mink`` [N m s/rad] (2e2 and 3e2 overshot
+    3-6 mm at k = 1; 5e2: 1.8 mm)."""
+    mink_arm_drive_mode: str = "force"
+    """PhysX drive mode (``acceleration`` drives oscillated, measured: 30 mm drift)."""
     """Wrist camera field of view [rad] (90°, as in the references)."""
 
     @property
@@ -87,9 +96,10 @@ class PandaAWDA(Panda):
             joint_names=self.arm_joint_names,
             lower=None,
             upper=None,
-            stiffness=self.arm_stiffness,
-            damping=self.arm_damping,
+            stiffness=self.mink_arm_stiffness,
+            damping=self.mink_arm_damping,
             force_limit=self.arm_force_limit,
+            drive_mode=self.mink_arm_drive_mode,
         )
         gripper = BinaryGripperControllerConfig(
             joint_names=self.gripper_joint_names,

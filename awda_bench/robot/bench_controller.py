@@ -34,6 +34,23 @@ def add_controller_args(parser: argparse.ArgumentParser) -> None:
         dest="envs",
         help="scene(s) to measure on (repeatable; default: AWDA-EmptyTable-v1 and AWDA-PickPlace-v1)",
     )
+    parser.add_argument(
+        "--fidelity",
+        action="store_true",
+        help="measure what the 4-D action does instead of speed: achieved/commanded per step, "
+        "top speed, proportional-law error and overshoot, drift, wind-up (pick-place scene)",
+    )
+    parser.add_argument(
+        "--robot",
+        default="panda_awda",
+        help="embodiment for --fidelity: panda_awda or awda_demonstrator (default %(default)s)",
+    )
+    parser.add_argument(
+        "--targets",
+        type=int,
+        default=20,
+        help="random targets of the proportional law for --fidelity (default %(default)s)",
+    )
 
 
 def _circle_action(t: int, scale: float) -> np.ndarray:
@@ -43,9 +60,33 @@ def _circle_action(t: int, scale: float) -> np.ndarray:
 def run_controller_bench(args: argparse.Namespace) -> int:
     import awda_bench.envs  # noqa: F401  (registers the tasks and robots)
 
+    if args.fidelity:
+        for env_id in args.envs or ["AWDA-PickPlace-v1"]:
+            _fidelity_scene(env_id, args.robot, args.targets)
+        return 0
     for env_id in args.envs or ["AWDA-EmptyTable-v1", "AWDA-PickPlace-v1"]:
         _bench_scene(env_id, args.steps, args.rounds)
     return 0
+
+
+def _fidelity_scene(env_id: str, robot: str, targets: int) -> None:
+    import gymnasium as gym
+
+    from awda_bench.robot.controller_fidelity import format_fidelity, measure_fidelity
+
+    env = gym.make(
+        env_id,
+        obs_mode="state",
+        reward_mode="none",
+        robot_uids=robot,
+        render_backend=render_backend(),
+    )
+    try:
+        report = measure_fidelity(env, targets=targets)
+    finally:
+        env.close()
+    print(format_fidelity(report, f"{env_id} ({robot})"))
+    print()
 
 
 def _bench_scene(env_id: str, steps: int, rounds: int) -> None:

@@ -5,9 +5,33 @@ Seated where ManiSkill seats its own IK controller: :class:`MinkEEPosController`
 ``controller_cls``. Per control step and env::
 
     a[0:3] in [-1,1] --clip--> delta = a * max_step_m  (world axes, rotated into the base frame)
-    p_now = FK(q_measured)                              (MuJoCo model of the same URDF)
-    p*    = clip(p_now + delta, workspace_low_m, workspace_high_m)
-    q*    = mink IK(q_measured -> p*, gripper pointing down, joint limits)   -> joint drive targets
+    p_meas = FK(q_measured)                             (MuJoCo model of the same URDF)
+    p*     = advance_target(p*_prev, p_meas, delta)     (accumulated; workspace box and reach;
+                                                         at most max_lead_m ahead of p_meas)
+    q*     = mink IK(q*_prev -> p*, gripper pointing down, joint limits)
+    drives : position target q*, velocity target (q* - q*_prev) * control_freq
+
+Why each piece (``python -m awda_bench bench controller --fidelity``, pick-place scene, CPU sim):
+
+- The first controller re-based every step on the *measured* TCP, and the joint PD drives
+  (stiffness 1e3, damping 1e2, no velocity target) lag their targets by ~2 control steps, so the
+  commanded lead was mostly eaten: achieved/commanded 0.39 at every magnitude from 1 mm/step up,
+  0.00 at 0.4 mm/step (a dead band), top speed 7.9 mm/step. Accumulating the target from the
+  previous target makes the steady-state gain 1.00 for every magnitude (0.99-1.00 measured).
+- Accumulation alone leaves the lag, and a proportional law on the measured TCP then overshoots
+  (k = 1: 9.7 mm). Stiffer drives (1e4 / 5e2, the agent's ``mink_arm_*``) and the velocity
+  feed-forward bring that to 1.8 mm with 0.01-0.02 mm final error at k = 0.25 .. 1 (without
+  feed-forward: 9 mm at k = 1, 2.9 mm at k = 0.5).
+- The IK is warm-started from the previous joint targets and iterates to ``IKConfig.tolerance_m``
+  = 0.01 mm (a 1 mm tolerance was a second dead band); one QP solve per step suffices because
+  the residual is removed by the next step's solve toward the same absolute target.
+- Blocked motion (pressing, pushing on the table, workspace clipping) cannot wind up: the target
+  stays within ``max_lead_m`` of the measured TCP; after 20 steps pressing on the table at full
+  scale the TCP rises on the first step of an up command.
+
+Whatever is carried from step to step (target, joint targets) is controller state: ``get_state``
+saves it, ``set_state`` restores it (a restored scene continues as the original would), and
+``reset`` re-synchronizes it to the measured pose.
 """
 
 from __future__ import annotations
@@ -25,10 +49,15 @@ from mani_skill.agents.controllers.pd_joint_pos import (
 )
 
 from awda_bench.robot.ik import IKConfig, PandaIK
+from awda_bench.robot.tcp_target import advance_target
 
 
 class MinkEEPosController(PDJointPosController):
-    """TCP position deltas in [-1, 1]^3 -> arm joint targets by mink differential IK."""
+    """TCP position deltas in [-1, 1]^3 -> arm joint targets by mink differential IK.
+
+    Controller state (``get_state``/``set_state``, re-synchronized to the measured pose by
+    ``reset``): the accumulated TCP target (base frame) and the arm's joint targets.
+    """
 
     config: MinkEEPosControllerConfig
 
@@ -40,8 +69,10 @@ class MinkEEPosController(PDJointPosController):
         self._low = np.asarray(self.config.workspace_low_m, dtype=np.float64)
         self._high = np.asarray(self.config.workspace_high_m, dtype=np.float64)
         self._max_reach = float(self.config.max_reach_xy_m)
-        self.last_target_pos = np.zeros((n, 3))
-        """TCP targets of the last step, base frame [m] (after workspace clipping)."""
+        self.target_pos = np.zeros((n, 3))
+        """Accumulated TCP target per env, base frame [m] (controller state)."""
+        self.joint_target = np.zeros((n, len(self.joints)))
+        """Arm joint targets of the last IK solve per env [rad] (controller state)."""
         self.last_ik_error = np.zeros(n)
         """Remaining model TCP error of the last IK solve per env [m]."""
 
@@ -50,13 +81,42 @@ class MinkEEPosController(PDJointPosController):
 
     _base_rotation_cache: np.ndarray | None = None
 
+    @property
+    def last_target_pos(self) -> np.ndarray:
+        """(n, 3) TCP targets after the last step, base frame [m] (after workspace clipping)."""
+        return self.target_pos
+
     def reset(self) -> None:
         super().reset()
         self._base_rotation_cache = None
+        mask = self.scene._reset_mask.cpu().numpy()
+        qpos = self.articulation.get_qpos().cpu().numpy().astype(np.float64)
+        for i, solver in enumerate(self.solvers):
+            if mask is not None and not mask[i]:
+                continue
+            self.target_pos[i] = solver.tcp_position(qpos[i])
+            self.joint_target[i] = qpos[i, solver.arm_qpos_index]
+        self._apply(self.joint_target, np.zeros_like(self.joint_target))
 
-    def set_state(self, state: dict) -> None:
-        super().set_state(state)
+    def get_state(self) -> dict:
+        return {
+            "target_pos": torch.as_tensor(self.target_pos.copy(), dtype=torch.float64),
+            "joint_target": torch.as_tensor(self.joint_target.copy(), dtype=torch.float64),
+        }
+
+    def set_state(self, state: dict | None) -> None:
+        """Restore the target and re-apply the joint targets (velocity targets zero: a restored
+        scene's joint velocities come with the articulation state)."""
+        if not state:
+            return
+        self.target_pos = np.array(state["target_pos"].cpu().numpy(), dtype=np.float64).reshape(
+            -1, 3
+        )
+        self.joint_target = np.array(state["joint_target"].cpu().numpy(), dtype=np.float64).reshape(
+            len(self.target_pos), -1
+        )
         self._base_rotation_cache = None
+        self._apply(self.joint_target, np.zeros_like(self.joint_target))
 
     def _base_rotation(self) -> np.ndarray:
         """(n, 3, 3) rotation of the robot base in the world, read once per episode (fixed base)."""
@@ -67,33 +127,59 @@ class MinkEEPosController(PDJointPosController):
         return self._base_rotation_cache
 
     def set_action(self, action: torch.Tensor) -> None:
-        self._step = 0
-        qpos_all = self.articulation.get_qpos()
-        self._start_qpos = qpos_all[:, self.active_joint_indices]
+        cfg = self.config
         commands = np.clip(action.detach().cpu().numpy().astype(np.float64), -1.0, 1.0)
-        delta_world = commands * self.config.max_step_m
         rotation = self._base_rotation()
-        qpos = qpos_all.cpu().numpy()
-        targets = np.empty((len(qpos), len(self.solvers[0].arm_qpos_index)))
-        for i, solver in enumerate(self.solvers):
-            delta_base = rotation[i % len(rotation)].T @ delta_world[i]
-            q_arm, target, error = solver.solve_delta(
-                qpos[i], delta_base, self._low, self._high, self._max_reach
-            )
-            targets[i] = q_arm
-            self.last_target_pos[i] = target
-            self.last_ik_error[i] = error
-        self._target_qpos = torch.as_tensor(
-            targets, dtype=self._start_qpos.dtype, device=self.device
+        # world-frame deltas into each env's base frame: delta_base = R^T delta_world
+        delta_base = np.einsum("nji,nj->ni", rotation, commands * cfg.max_step_m)
+        qpos = self.articulation.get_qpos().cpu().numpy().astype(np.float64)
+        measured = np.stack([s.tcp_position(q) for s, q in zip(self.solvers, qpos, strict=True)])
+        self.target_pos = advance_target(
+            self.target_pos,
+            measured,
+            delta_base,
+            self._low,
+            self._high,
+            cfg.max_lead_m,
+            self._max_reach,
         )
+        previous = self.joint_target.copy()
+        for i, solver in enumerate(self.solvers):
+            self.joint_target[i], self.last_ik_error[i] = solver.solve(
+                self.joint_target[i], self.target_pos[i]
+            )
+        velocity = (self.joint_target - previous) * (self._control_freq * cfg.velocity_feedforward)
+        self._apply(self.joint_target, velocity)
+
+    @property  # type: ignore[override]
+    def _target_qpos(self) -> torch.Tensor:
+        """ManiSkill's view of the joint targets (built on demand, not every step)."""
+        return torch.as_tensor(self.joint_target, dtype=torch.float32, device=self.device)
+
+    @_target_qpos.setter
+    def _target_qpos(self, value: torch.Tensor | None) -> None:
+        if value is not None and hasattr(self, "joint_target"):
+            self.joint_target = (
+                value.detach().cpu().numpy().astype(np.float64).reshape(self.joint_target.shape)
+            )
+
+    def _apply(self, targets: np.ndarray, velocities: np.ndarray) -> None:
+        """Write joint position and velocity drive targets."""
+        self._step = 0
         if self.scene.gpu_sim_enabled:
             self.set_drive_targets(self._target_qpos)
-        else:
-            # CPU sim: one SAPIEN call per joint and sub-scene, skipping ManiSkill's per-joint tensor
-            # conversions (measured ~0.1 ms/step); same effect as set_drive_targets.
-            for i, joint in enumerate(self.joints):
-                for env_index, physx_joint in enumerate(joint._objs):
-                    physx_joint.set_drive_target(float(targets[env_index, i]))
+            self.articulation.set_joint_drive_velocity_targets(
+                torch.as_tensor(velocities, dtype=torch.float32, device=self.device),
+                self.joints,
+                self.active_joint_indices,
+            )
+            return
+        # CPU sim: one SAPIEN call per joint and sub-scene, skipping ManiSkill's per-joint tensor
+        # conversions (measured ~0.1 ms/step); same effect as set_drive_targets.
+        for i, joint in enumerate(self.joints):
+            for env_index, physx_joint in enumerate(joint._objs):
+                physx_joint.set_drive_target(float(targets[env_index, i]))
+                physx_joint.set_drive_velocity_target(float(velocities[env_index, i]))
 
 
 @dataclass
@@ -107,6 +193,11 @@ class MinkEEPosControllerConfig(PDJointPosControllerConfig):
     """Lower corner of the box TCP targets are clipped to, robot base frame [m]."""
     workspace_high_m: tuple[float, float, float] = (0.78, 0.50, 0.55)
     """Upper corner of that box, robot base frame [m]."""
+    max_lead_m: float = 0.03
+    """The TCP target never runs more than this ahead of the measured TCP [m] (blocked motion
+    does not wind up; see :mod:`awda_bench.robot.tcp_target`)."""
+    velocity_feedforward: float = 1.0
+    """Joint velocity targets = this x (joint-target change per control step) / control period."""
     max_reach_xy_m: float = 0.78
     """TCP targets are also clipped to this horizontal distance from the base axis [m]. Measured
     with the gripper pointing down: every target with radius <= 0.75 m and z <= 0.4 m is reached to

@@ -10,10 +10,12 @@ floats like a mocap hand).
 
 Its controller has the semantics of the agent's ``pd_ee_delta_pos_mink``::
 
-    action[:, 0:3] in [-1, 1] -> target_xyz = measured_xyz + action * max_step_m
+    action[:, 0:3] in [-1, 1] -> target_xyz = previous target_xyz + action * max_step_m
                                   (world axes; no IK needed: the root's three prismatic joints
-                                  *are* the TCP translation, as p* = FK(q) + delta for the agent)
-    target_xyz clipped to [workspace_low_m, workspace_high_m] (root-joint coordinates)
+                                  *are* the TCP translation), clipped to
+                                  [workspace_low_m, workspace_high_m] (root-joint coordinates)
+                                  and to max_lead_m from the measured root position
+                                  (:mod:`awda_bench.robot.tcp_target`, as the agent's)
     rotation joints held at their reset values (pointing down)
     action[:, 3] > 0 closes the fingers, <= 0 opens them
 """
@@ -37,6 +39,7 @@ from mani_skill.utils import common
 from mani_skill.utils.structs.actor import Actor
 
 from awda_bench.robot.controller import BinaryGripperControllerConfig
+from awda_bench.robot.tcp_target import advance_target
 
 DEMONSTRATOR_UID = "awda_demonstrator"
 """ManiSkill agent uid of the demonstrator."""
@@ -62,23 +65,38 @@ class FloatingDeltaPosController(PDJointPosController):
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=(3,), dtype=np.float32)
 
     def set_action(self, action: torch.Tensor) -> None:
-        commands = torch.clamp(action.to(self._target_qpos.dtype), -1.0, 1.0)
-        self._step = 0
-        self._start_qpos = self.qpos
-        low = torch.as_tensor(self.config.workspace_low_m, dtype=commands.dtype, device=self.device)
-        high = torch.as_tensor(
-            self.config.workspace_high_m, dtype=commands.dtype, device=self.device
+        cfg = self.config
+        commands = np.clip(action.detach().cpu().numpy().astype(np.float64), -1.0, 1.0)
+        measured = self.qpos[:, :3].detach().cpu().numpy().astype(np.float64)
+        current = self._target_qpos[:, :3].detach().cpu().numpy().astype(np.float64)
+        target = advance_target(
+            current,
+            measured,
+            commands * cfg.max_step_m,
+            np.asarray(cfg.workspace_low_m),
+            np.asarray(cfg.workspace_high_m),
+            cfg.max_lead_m,
         )
-        target = self._target_qpos.clone()
-        target[:, :3] = torch.clamp(self.qpos[:, :3] + commands * self.config.max_step_m, low, high)
-        self._target_qpos = target
+        self._step = 0
+        self._target_qpos = self._target_qpos.clone()
+        self._target_qpos[:, :3] = torch.as_tensor(
+            target, dtype=self._target_qpos.dtype, device=self.device
+        )
+        self.set_drive_targets(self._target_qpos)
+
+    def reset(self) -> None:
+        """Targets re-synchronized to the measured pose (ManiSkill's reset does it for reset envs)."""
+        super().reset()
         self.set_drive_targets(self._target_qpos)
 
     def get_state(self) -> dict:
-        return {"target_qpos": self._target_qpos}
+        return {"target_qpos": self._target_qpos.clone()}
 
-    def set_state(self, state: dict) -> None:
-        self._target_qpos = state["target_qpos"]
+    def set_state(self, state: dict | None) -> None:
+        if not state:
+            return
+        self._target_qpos = state["target_qpos"].to(self.device).clone()
+        self.set_drive_targets(self._target_qpos)
 
 
 @dataclass
@@ -90,6 +108,9 @@ class FloatingDeltaPosControllerConfig(PDJointPosControllerConfig):
 
     max_step_m: float = 0.02
     """TCP displacement of a unit action component in one control step [m] (as the agent's)."""
+    max_lead_m: float = 0.03
+    """The target never runs more than this ahead of the measured root position [m] (as the
+    agent's; :mod:`awda_bench.robot.tcp_target`)."""
     workspace_low_m: tuple[float, float, float] = (-0.45, -0.55, 0.11)
     """Lower corner of the box root-joint targets are clipped to [m] (z: TCP 0.7 cm above table)."""
     workspace_high_m: tuple[float, float, float] = (0.30, 0.55, 0.80)

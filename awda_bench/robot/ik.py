@@ -41,10 +41,10 @@ class IKConfig:
     """Levenberg-Marquardt damping of the QP (regularises near singularities)."""
     dt_s: float = 1.0
     """Integration step of the velocity the QP returns [s]; 1 makes ``v`` a position increment."""
-    max_iterations: int = 2
+    max_iterations: int = 1
     """QP solves per call at most. One solve leaves ~0.25 mm of a 2 cm step (measured), which the
     closed loop (every control step starts from the measured joints) removes on the next step."""
-    tolerance_m: float = 1e-3
+    tolerance_m: float = 1e-5
     """Stop iterating once the TCP is this close to the target in the model [m]."""
     solver: str = "daqp"
     """qpsolvers backend."""
