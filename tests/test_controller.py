@@ -136,3 +136,52 @@ def test_state_round_trip_restores_the_gripper_command(env) -> None:
     for _ in range(15):
         env.step(np.array([0.0, 0.0, 0.0, -1.0]))
     assert float(agent.gripper_opening_m[0]) > 0.075
+
+
+def test_the_action_means_what_it_says(env) -> None:
+    """Issue 10's goals, measured as ``bench controller --fidelity`` measures them (fewer targets)."""
+    from awda_bench.robot.controller_fidelity import measure_fidelity
+
+    report = measure_fidelity(env, targets=4)
+    gains = np.array(list(report.gains.values()))
+    assert gains.min() >= 0.9 and gains.max() <= 1.1, report.gains  # no dead band at 0.4 mm/step
+    assert report.top_speed_mm >= 15.0
+    for k in (0.25, 0.5):
+        _median, worst, overshoot = report.law[k]
+        assert worst <= 1.0 and overshoot <= 2.0, (k, report.law[k])
+    assert report.law[1.0][1] <= 1.0, report.law[1.0]
+    assert report.drift_mm < 0.5
+    assert 1 <= report.windup_steps <= 2
+
+
+def test_controller_state_round_trip_continues_exactly(env) -> None:
+    """The accumulated target is controller state: restore, replay the same actions, same motion."""
+    env.reset(seed=0)
+    u = env.unwrapped
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        env.step(np.concatenate([rng.uniform(-1, 1, 3), [-1.0]]))
+    state = u.get_state_dict()
+    actions = [np.concatenate([rng.uniform(-1, 1, 3), [-1.0]]) for _ in range(8)]
+    for a in actions:
+        env.step(a)
+    first = _tcp(env)
+    for _ in range(10):  # wander off so the restore has something to undo
+        env.step(np.array([1.0, 0.0, 0.0, 1.0]))
+    u.set_state_dict(state)
+    for a in actions:
+        env.step(a)
+    assert _tcp(env) == pytest.approx(first, abs=1e-5)
+
+
+def test_reset_resynchronizes_the_target_to_the_measured_pose(env) -> None:
+    env.reset(seed=0)
+    arm = env.unwrapped.agent.controller.controllers["arm"]
+    rest_target = arm.target_pos.copy()
+    for _ in range(10):
+        env.step(np.array([1.0, 1.0, 0.0, -1.0]))
+    env.reset(seed=0)
+    assert arm.target_pos == pytest.approx(rest_target, abs=1e-6)
+    env.step(np.zeros(4))  # a zero command after reset holds still: no leftover lead
+    base = env.unwrapped.agent.robot.pose.p[0].cpu().numpy()
+    assert _tcp(env) - base == pytest.approx(rest_target[0], abs=5e-4)
