@@ -177,19 +177,11 @@ def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> Colle
     plan = make_plan(config)
     root = config.out
     check_data_dir(root, plan)
-    try:
-        root.mkdir(parents=True, exist_ok=True)
-        write_json(root / MANIFEST, _manifest(plan, [], complete=False))
-    except OSError as exc:
-        raise UsageError(
-            f"cannot write to --out {root} ({exc.strerror or exc}); fix its permissions or "
-            "choose another directory"
-        ) from exc
-
     result = CollectResult(planned=sum(u.planned for u in plan.units))
     states: dict[tuple[str, int], _UnitState] = {}
     jobs: list[CollectJob] = []
-    for unit in plan.units:
+    finished: list[_UnitState] = []  # every attempt recorded, killed before consolidation
+    for unit in plan.units:  # read what is there before writing anything
         if unit_is_complete(root, unit.name, unit.planned):
             result.already += unit.planned
             continue
@@ -198,9 +190,20 @@ def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> Colle
         states[unit.key] = state
         result.already += min(len(kept), unit.planned)
         if state.finished:
-            _consolidate(root, plan, state)
+            finished.append(state)
         else:
             jobs += [make_job(config, unit.role, unit.task, i) for i in state.missing()]
+
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        write_json(root / MANIFEST, _manifest(plan, [], complete=False))
+    except OSError as exc:
+        raise UsageError(
+            f"cannot write to --out {root} ({exc.strerror or exc}); fix its permissions or "
+            "choose another directory"
+        ) from exc
+    for state in finished:
+        _consolidate(root, plan, state)
 
     bar = tqdm(
         total=result.planned,

@@ -15,7 +15,8 @@
 
 Pairs never cross tasks (agent and demonstrator scenes of one task differ: their seeds are hashed
 with different roles) and never come from a ``test`` collection unless ``allow_test=True`` (a
-validation set). MOSAIC's leave-one-family-out training set is ``exclude_families=("door",)``.
+validation set). MOSAIC's leave-one-family-out training set is
+``selection=Selection(exclude_families=("door",))``.
 
 :class:`TosviDataset` (``TosviNet.compute_loss``), one sample per agent step ``t``::
 
@@ -63,6 +64,26 @@ class EpisodeRef:
     """T: actions in the episode (T + 1 frames)."""
     meta: dict[str, Any]
     """The episode's JSON entry."""
+
+
+@dataclass(frozen=True)
+class Selection:
+    """Which tasks/families a dataset draws from (MOSAIC leave-one-family-out:
+    ``Selection(exclude_families=("door",))``)."""
+
+    tasks: tuple[int, ...] | None = None
+    """Only these task indices (``None``: all)."""
+    families: tuple[str, ...] | None = None
+    """Only these families (``None``: all)."""
+    exclude_families: tuple[str, ...] = ()
+    """Never these families."""
+
+    def keeps(self, ref: EpisodeRef) -> bool:
+        return (
+            (self.tasks is None or ref.task in self.tasks)
+            and (self.families is None or ref.family in self.families)
+            and ref.family not in self.exclude_families
+        )
 
 
 class CollectedData:
@@ -115,25 +136,10 @@ class CollectedData:
     def split(self) -> str:
         return str(self.manifest.get("definition", {}).get("split", ""))
 
-    def select(
-        self,
-        role: str,
-        *,
-        tasks: Iterable[int] | None = None,
-        families: Iterable[str] | None = None,
-        exclude_families: Iterable[str] = (),
-    ) -> list[EpisodeRef]:
-        task_set = None if tasks is None else set(tasks)
-        family_set = None if families is None else set(families)
-        excluded = set(exclude_families)
-        return [
-            e
-            for e in self.episodes
-            if e.role == role
-            and (task_set is None or e.task in task_set)
-            and (family_set is None or e.family in family_set)
-            and e.family not in excluded
-        ]
+    def select(self, role: str, selection: Selection | None = None) -> list[EpisodeRef]:
+        """The episodes of ``role`` that ``selection`` (default: all) keeps, in file order."""
+        selection = selection or Selection()
+        return [e for e in self.episodes if e.role == role and selection.keeps(e)]
 
     def group(self, ref: EpisodeRef) -> h5py.Group:
         if os.getpid() != self._pid:  # a forked DataLoader worker: never share HDF5 handles
@@ -251,9 +257,7 @@ class AwdaPairDataset:
         trajectory_points: int = 50,
         attributes: tuple[str, ...] = ("grasp",),
         image_size: tuple[int, int] | None = None,
-        tasks: Iterable[int] | None = None,
-        families: Iterable[str] | None = None,
-        exclude_families: Iterable[str] = (),
+        selection: Selection | None = None,
         include_synthesized: bool = True,
         allow_test: bool = False,
     ) -> None:
@@ -265,10 +269,8 @@ class AwdaPairDataset:
         self.trajectory_points = trajectory_points
         self.attributes = attributes
         self.image_size = image_size
-        exclude = tuple(exclude_families)
-        pick = {"tasks": tasks, "families": families, "exclude_families": exclude}
-        agents = data.select(ROLE_AGENT, **pick)
-        demos = data.select(ROLE_DEMONSTRATOR, **pick)
+        agents = data.select(ROLE_AGENT, selection)
+        demos = data.select(ROLE_DEMONSTRATOR, selection)
         self.pairs: list[tuple[EpisodeRef, EpisodeRef, int]] = []
         by_task: dict[int, list[EpisodeRef]] = {}
         for d in demos:
@@ -277,7 +279,7 @@ class AwdaPairDataset:
             for d in by_task.get(a.task, []):
                 self.pairs.append((a, d, 0))
         if include_synthesized:
-            for s in data.select(ROLE_SYNTHESIZED, **pick):
+            for s in data.select(ROLE_SYNTHESIZED, selection):
                 self.pairs.append((s, s, 1))
         if not self.pairs:
             raise UsageError(
@@ -316,9 +318,7 @@ class TosviDataset:
         with_depth: bool = False,
         image_size: tuple[int, int] | None = None,
         depth_size: tuple[int, int] | None = None,
-        tasks: Iterable[int] | None = None,
-        families: Iterable[str] | None = None,
-        exclude_families: Iterable[str] = (),
+        selection: Selection | None = None,
         include_synthesized: bool = False,
         allow_test: bool = False,
     ) -> None:
@@ -331,13 +331,11 @@ class TosviDataset:
         self.with_depth = with_depth
         self.image_size = image_size
         self.depth_size = depth_size
-        exclude = tuple(exclude_families)
-        pick = {"tasks": tasks, "families": families, "exclude_families": exclude}
         demos: dict[int, list[EpisodeRef]] = {}
-        for d in data.select(ROLE_DEMONSTRATOR, **pick):
+        for d in data.select(ROLE_DEMONSTRATOR, selection):
             demos.setdefault(d.task, []).append(d)
         self.samples: list[tuple[EpisodeRef, EpisodeRef, int]] = []
-        for a_index, agent in enumerate(data.select(ROLE_AGENT, **pick)):
+        for a_index, agent in enumerate(data.select(ROLE_AGENT, selection)):
             task_demos = demos.get(agent.task, [])
             if not task_demos:
                 continue
@@ -345,7 +343,7 @@ class TosviDataset:
                 demo = task_demos[(7919 * a_index + t) % len(task_demos)]
                 self.samples.append((agent, demo, t))
         if include_synthesized:
-            for s in data.select(ROLE_SYNTHESIZED, **pick):
+            for s in data.select(ROLE_SYNTHESIZED, selection):
                 self.samples += [(s, s, t) for t in range(s.steps)]
         if not self.samples:
             raise UsageError(

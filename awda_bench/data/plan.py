@@ -195,4 +195,5 @@ def make_plan(config: CollectConfig) -> CollectPlan:
         "awda_bench_version": version,
         "code_sha256": code_sha256(),
     }
+    definition = json.loads(json.dumps(definition))  # as the manifest will read it back
     return CollectPlan(suite=suite, units=tuple(units), definition=definition)
