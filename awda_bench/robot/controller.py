@@ -47,6 +47,7 @@ from mani_skill.agents.controllers.pd_joint_pos import (
     PDJointPosMimicController,
     PDJointPosMimicControllerConfig,
 )
+from mani_skill.utils import common
 
 from awda_bench.robot.ik import IKConfig, PandaIK
 from awda_bench.robot.tcp_target import advance_target
@@ -109,11 +110,12 @@ class MinkEEPosController(PDJointPosController):
         scene's joint velocities come with the articulation state)."""
         if not state:
             return
-        self.target_pos = np.array(state["target_pos"].cpu().numpy(), dtype=np.float64).reshape(
-            -1, 3
-        )
-        self.joint_target = np.array(state["joint_target"].cpu().numpy(), dtype=np.float64).reshape(
-            len(self.target_pos), -1
+        # tensors from get_state_dict, or arrays from a trajectory file's env_states
+        self.target_pos = common.to_numpy(state["target_pos"]).astype(np.float64).reshape(-1, 3)
+        self.joint_target = (
+            common.to_numpy(state["joint_target"])
+            .astype(np.float64)
+            .reshape(len(self.target_pos), -1)
         )
         self._base_rotation_cache = None
         self._apply(self.joint_target, np.zeros_like(self.joint_target))
@@ -248,8 +250,9 @@ class BinaryGripperController(PDJointPosMimicController):
         return {"closed": self._closed.clone()}
 
     def set_state(self, state: dict) -> None:
-        if "closed" in state:
-            self._apply(state["closed"].to(self.device).bool())
+        if state and "closed" in state:
+            # tensors from get_state_dict, or arrays from a trajectory file's env_states
+            self._apply(common.to_tensor(state["closed"], device=self.device).bool())
 
     def set_action(self, action: torch.Tensor) -> None:
         closed = action[:, :1] > 0

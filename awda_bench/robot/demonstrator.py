@@ -95,7 +95,8 @@ class FloatingDeltaPosController(PDJointPosController):
     def set_state(self, state: dict | None) -> None:
         if not state:
             return
-        self._target_qpos = state["target_qpos"].to(self.device).clone()
+        # tensors from get_state_dict, or arrays from a trajectory file's env_states
+        self._target_qpos = common.to_tensor(state["target_qpos"], device=self.device).clone()
         self.set_drive_targets(self._target_qpos)
 
 
