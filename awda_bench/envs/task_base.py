@@ -12,7 +12,9 @@ places them in ``_initialize_task(env_idx, variation)``, and judges them in
   ``reached`` (TCP within ``reach_threshold_m`` of the target before the first grip command) and
   ``grasped`` (reached, then the target lifted ``lift_threshold_m``);
 - ``gripper_opening_m()``, ``truth_signals()`` (simulator truths the demo recorder logs per step),
-- state round trips including those flags (``get_state_dict``/``set_state_dict``).
+- exact state round trips including those flags and the controller state, flat
+  (``get_state``/``set_state``) and as dicts (``get_state_dict``/``set_state_dict``), and episodes
+  that do not depend on the ones run before them (see :mod:`awda_bench.envs.exact_state`).
 """
 
 from __future__ import annotations
@@ -22,17 +24,17 @@ from typing import Any, ClassVar
 import numpy as np
 import sapien
 import torch
-from mani_skill.envs.sapien_env import BaseEnv
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
 from mani_skill.utils.scene_builder.table import TableSceneBuilder
 from mani_skill.utils.structs.types import SimConfig
 
 from awda_bench.envs.embodiments import AGENT_UID, EMBODIMENTS, embodiment
+from awda_bench.envs.exact_state import ExactStateEnv, env_rows
 from awda_bench.errors import UsageError
 
 
-class AWDATaskEnv(BaseEnv):
+class AWDATaskEnv(ExactStateEnv):
     """Base of the benchmark's tasks (see the module docstring for the contract)."""
 
     SUPPORTED_ROBOTS = list(EMBODIMENTS)
@@ -182,6 +184,7 @@ class AWDATaskEnv(BaseEnv):
             self.success_once[env_idx] = False
             if self.has_grasp_target:
                 self.target_start_z[env_idx] = self.target_position()[env_idx, 2]
+            self._forget_contact_history(env_idx)
 
     # ------------------------------------------------------------------ robot signals
     def gripper_opening_m(self) -> torch.Tensor:
@@ -248,13 +251,14 @@ class AWDATaskEnv(BaseEnv):
         return state
 
     def set_state_dict(self, state: dict, env_idx: torch.Tensor | None = None) -> None:
+        """Scene and controller state (:class:`ExactStateEnv`), then the task flags."""
         state = dict(state)
         task_state = state.pop("task_state", None)
         super().set_state_dict(state, env_idx)
         if task_state is None:
             return
-        idx = slice(None) if env_idx is None else env_idx
+        idx = torch.arange(self.num_envs, device=self.device) if env_idx is None else env_idx
         for name in self._TASK_STATE:
             current = getattr(self, name)
-            value = torch.as_tensor(task_state[name], device=self.device).reshape(self.num_envs)
-            current[idx] = value[idx].to(current.dtype)
+            value = torch.as_tensor(task_state[name], device=self.device).reshape(-1)
+            current[idx] = env_rows(value, idx, self.num_envs).to(current.dtype)
