@@ -61,12 +61,15 @@ BALLS: tuple[BallSpec, ...] = (
 
 HOOPS: tuple[HoopSpec, ...] = (
     HoopSpec(goal_m=(0.04, -0.27, 0.13), color=(0.10, 0.65, 0.20, 1.0)),
-    HoopSpec(goal_m=(0.05, -0.09, 0.17), color=(0.75, 0.15, 0.70, 1.0)),
-    HoopSpec(goal_m=(0.05, 0.09, 0.15), color=(0.05, 0.70, 0.80, 1.0)),
+    HoopSpec(goal_m=(0.05, -0.12, 0.17), color=(0.75, 0.15, 0.70, 1.0)),
+    HoopSpec(goal_m=(0.05, 0.12, 0.15), color=(0.05, 0.70, 0.80, 1.0)),
     HoopSpec(goal_m=(0.04, 0.27, 0.18), color=(0.15, 0.15, 0.15, 1.0)),
 )
 """Hoop ``j`` is the goal of variations ``j, 4 + j, 8 + j`` (green, magenta, cyan, black; -y to
-+y), at four different heights."""
++y), at four different heights. The two inner hoops stand at ``|y| = 0.12`` m so that the agent's
+open fingers at its rest pose (TCP at (0, 0, 0.17), fingers at y = +-0.04) clear their rings by
+~2 cm: at ``|y| = 0.09`` a finger touched the magenta ring at rest, and PhysX carried that contact
+into the next episode (a seeded sequence of episodes did not repeat)."""
 
 
 @dataclass(frozen=True)
