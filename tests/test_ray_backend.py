@@ -277,3 +277,30 @@ def test_bad_backend_options_are_one_line_errors(tmp_path: Path, suites: Path, c
     assert not out.exists()
     with pytest.raises(SystemExit):
         _run(suites, out, "--backend", "dask")
+
+
+@pytest.mark.slow
+def test_bench_harness_times_ray_beside_local(tmp_path: Path, suites: Path, capsys) -> None:
+    code = main(
+        [
+            "bench",
+            "harness",
+            "--suite",
+            "fake",
+            "--tasks-dir",
+            str(suites),
+            "--method",
+            f"{FAKES}:SkillPolicy",
+            "--episodes",
+            "2",
+            "--workers",
+            "2",
+            "--backends",
+            "local",
+            "ray",
+        ]
+    )
+    out = capsys.readouterr().out
+    assert code == 0, out
+    assert "ray vs local, 2 workers:" in out
+    assert "identical per-episode outcomes across backends and worker counts: yes" in out

@@ -1,7 +1,8 @@
 """``python -m awda_bench bench harness``: episodes/minute with 1 and 2 workers, the parallel
-speed-up, and the harness's own overhead as a share of episode time (goal < 5 %).
+speed-up, and the harness's own overhead as a share of episode time (goal < 5 %);
+``--backends local ray`` also times the Ray backend beside the local pool (goal >= 0.9x).
 
-Each worker count runs the same sweep into its own temporary store. Definitions::
+Each (backend, worker count) runs the same sweep into its own temporary store. Definitions::
 
     episodes/min          = episodes / sweep wall time * 60         (worker start-up included)
     steady episodes/min   = episodes / (wall - start-up) * 60
@@ -19,6 +20,7 @@ import sqlite3
 import tempfile
 from pathlib import Path
 
+from awda_bench.harness.backends import BACKENDS
 from awda_bench.harness.methods import DEFAULT_METHOD
 from awda_bench.harness.results_store import STORE_NAME
 from awda_bench.harness.sweep import SweepConfig, SweepResult, run_sweep
@@ -37,6 +39,13 @@ def add_harness_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--workers", type=int, nargs="+", default=[1, 2], help="worker counts (default 1 2)"
     )
+    parser.add_argument(
+        "--backends",
+        nargs="+",
+        choices=BACKENDS,
+        default=[BACKENDS[0]],
+        help="backends to time, each with every worker count (default local)",
+    )
     parser.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
     parser.add_argument("--keep", type=Path, help="keep the run directories under this path")
     parser.add_argument("--tasks-dir", type=Path, default=SUITES_DIR, help=argparse.SUPPRESS)
@@ -54,9 +63,10 @@ def _outcomes(run_dir: Path) -> list[tuple]:
         db.close()
 
 
-def describe(workers: int, r: SweepResult) -> dict[str, float]:
+def describe(workers: int, r: SweepResult, backend: str = BACKENDS[0]) -> dict[str, float | str]:
     busy = max(r.wall_time_s - r.startup_s, 1e-9)
     return {
+        "backend": backend,
         "workers": workers,
         "episodes": r.ran,
         "errors": r.errors,
@@ -72,12 +82,17 @@ def describe(workers: int, r: SweepResult) -> dict[str, float]:
     }
 
 
+def _ratio(row: dict[str, float | str], base: dict[str, float | str], key: str) -> float:
+    return float(row[key]) / float(base[key])
+
+
 def run_harness_bench(args: argparse.Namespace) -> int:
     rows, outcomes = [], []
     with tempfile.TemporaryDirectory(prefix="awda-bench-harness-") as tmp:
         root = args.keep or Path(tmp)
-        for workers in args.workers:
-            out = root / f"workers{workers}"
+        runs = [(b, w) for b in args.backends for w in args.workers]
+        for backend, workers in runs:
+            out = root / (f"workers{workers}" if backend == "local" else f"{backend}{workers}")
             config = SweepConfig(
                 suite=args.suite,
                 method=args.method,
@@ -85,10 +100,11 @@ def run_harness_bench(args: argparse.Namespace) -> int:
                 episodes=args.episodes,
                 seed=args.seed,
                 workers=workers,
+                backend=backend,
                 suites_dir=args.tasks_dir,
                 env_factory=args.env_factory,
                 progress=False,
-                command=f"bench harness --workers {workers}",
+                command=f"bench harness --backends {backend} --workers {workers}",
             )
             result = run_sweep(config)
             if result.skipped:
@@ -96,28 +112,39 @@ def run_harness_bench(args: argparse.Namespace) -> int:
                     f"note: {result.skipped} episodes were already in {out}; "
                     "only new ones are timed"
                 )
-            rows.append(describe(workers, result))
+            rows.append(describe(workers, result, backend))
             outcomes.append(_outcomes(out))
     print(f"harness throughput: {args.suite} / {args.method}, {args.episodes} episodes per task")
     print(
-        f"{'workers':>7} {'episodes':>8} {'wall s':>8} {'start s':>8} {'ep/min':>8} "
+        f"{'backend':>7} {'workers':>7} {'episodes':>8} {'wall s':>8} {'start s':>8} {'ep/min':>8} "
         f"{'steady':>8} {'ep s':>7} {'overhead':>9} {'in-ep':>7}"
     )
     for r in rows:
         print(
-            f"{r['workers']:>7} {r['episodes']:>8} {r['wall_s']:>8.1f} {r['startup_s']:>8.1f} "
+            f"{r['backend']:>7} {r['workers']:>7} {r['episodes']:>8} {r['wall_s']:>8.1f} "
+            f"{r['startup_s']:>8.1f} "
             f"{r['episodes_per_min']:>8.2f} {r['steady_episodes_per_min']:>8.2f} "
             f"{r['mean_episode_s']:>7.2f} "
             f"{r['harness_overhead']:>8.1%} {r['in_episode_overhead']:>7.2%}"
         )
-    if len(rows) >= 2:
-        base = rows[0]
-        for r in rows[1:]:
+    local = [r for r in rows if r["backend"] == BACKENDS[0]]
+    if len(local) >= 2:
+        base = local[0]
+        for r in local[1:]:
             print(
                 f"speed-up {r['workers']} vs {base['workers']} workers: "
-                f"{r['episodes_per_min'] / base['episodes_per_min']:.2f}x "
-                f"(steady {r['steady_episodes_per_min'] / base['steady_episodes_per_min']:.2f}x)"
+                f"{_ratio(r, base, 'episodes_per_min'):.2f}x "
+                f"(steady {_ratio(r, base, 'steady_episodes_per_min'):.2f}x)"
+            )
+    for r in rows:
+        peer = [b for b in local if b["workers"] == r["workers"]]
+        if r["backend"] != BACKENDS[0] and peer:
+            print(
+                f"{r['backend']} vs local, {r['workers']} workers: "
+                f"{_ratio(r, peer[0], 'episodes_per_min'):.2f}x episodes/min "
+                f"(steady {_ratio(r, peer[0], 'steady_episodes_per_min'):.2f}x)"
             )
     same = all(o == outcomes[0] for o in outcomes[1:])
-    print(f"identical per-episode outcomes across worker counts: {'yes' if same else 'NO'}")
+    across = "backends and worker counts" if len(args.backends) > 1 else "worker counts"
+    print(f"identical per-episode outcomes across {across}: {'yes' if same else 'NO'}")
     return 0 if same else 1

@@ -1,31 +1,35 @@
-"""Episode workers as Ray actors: the local :class:`~awda_bench.harness.worker_pool.WorkerPool`'s
-interface (jobs in, records streamed to a callback on the driver) on one machine or a cluster.
+"""Workers as Ray actors: the local pools' interface (jobs in, results streamed to a callback on
+the driver) on one machine or a cluster. :class:`RayActorPool` schedules any job type;
+:class:`RayWorkerPool` is the evaluation pool (``run --backend ray``), and
+:mod:`awda_bench.data.ray_runner` the collection one (``collect --backend ray``).
 
 ::
 
-    driver (the only store writer)                 actor k (num_cpus=1, OMP_NUM_THREADS=1)
-      ray.init(address) --- local instance, or a cluster started with `ray start --head`
-      EpisodeActor.remote(config) -------------->   holds nothing yet
-      start() --------------------------------->   executor = EpisodeExecutor(config): one env per
-            <------------- ("ready", pid, node)      env id, reused; policy cached per snapshot
-      play(Job) ------------------------------->   record = executor.play(job)
-            <------------------------- EpisodeRecord  (status ok, or error + traceback)
-      ... the next job is sent before the record is stored: the actor plays while we write
-      watchdog: a job older than episode_timeout_s -> ray.kill(actor), error record, respawn
-      actor or its node lost mid-episode -> the job is queued again (at most
-                                            LOST_WORKER_RETRIES times), a new actor is started
+    driver (the only writer)                       actor k (num_cpus=1, OMP_NUM_THREADS=1)
+      ray.init(address) --- a private local instance, or a cluster (`ray start --head`)
+      PoolActor.remote(build, config) ---------->   holds nothing yet
+      start() --------------------------------->   executor = build(config): its envs, built
+            <------------- ("ready", pid, host)      once and reused across jobs
+      play(job) ------------------------------->   result = executor.play(job)
+            <-------------------------------- result  (an exception inside is the executor's to
+                                                       turn into an error result)
+      ... the next job is sent before on_result(result) runs: the actor plays while we write;
+          on_result may return follow-up jobs (collect: a discarded attempt's replacement)
+      watchdog: a job older than job_timeout_s -> ray.kill(actor), lost(job) result, new actor
+      actor or its node lost mid-job -> the job is queued again (at most LOST_WORKER_RETRIES
+                                        times, then a lost(job) result), a new actor is started
 
-Differences from the local pool, and why:
+Differences from the local pools, and why:
 
-- A worker lost mid-episode (killed process, lost node) re-queues the episode instead of recording
-  an error: on a cluster losing a node is not the episode's fault. An episode that takes its worker
-  down :data:`LOST_WORKER_RETRIES` + 1 times (a simulator that segfaults on that scene) is recorded
-  as an error, so a sweep always ends. Every episode is recorded exactly once per invocation: a
-  job's record comes either from the actor that finished it or from the driver (watchdog, retries
-  spent), never both, because an actor is killed before its job is re-queued or recorded.
-- An actor that Ray cannot place (a cluster with fewer free CPUs than ``--workers``) waits; the
-  sweep stops with :class:`~awda_bench.harness.worker_pool.WorkerStartError` only when *no* actor
-  has built its env within ``start_timeout_s``.
+- A worker lost mid-job (killed process, lost node) re-queues the job instead of recording an
+  error: on a cluster losing a node is not the episode's fault. A job that takes its worker down
+  :data:`LOST_WORKER_RETRIES` + 1 times (a simulator that segfaults on that scene) ends as an
+  error result, so a run always ends. Each job gets exactly one result per invocation: from the
+  actor that finished it or from the driver (watchdog, retries spent), never both, because an
+  actor is killed before its job is queued again or given up.
+- An actor that Ray cannot place (a cluster with fewer free CPUs than ``workers``) waits; the run
+  stops with :class:`~awda_bench.harness.worker_pool.WorkerStartError` only when *no* actor has
+  started within ``start_timeout_s``.
 
 Ray is an optional extra (``pip install -e '.[ray]'``); without it :func:`require_ray` raises a
 one-line :class:`~awda_bench.errors.MissingExtraError`.
@@ -40,10 +44,10 @@ import sys
 import time
 import traceback
 from collections import Counter, deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from types import ModuleType
-from typing import Any
+from typing import Any, Generic, Protocol, TypeVar
 
 from awda_bench.errors import MissingExtraError, UsageError
 from awda_bench.harness.episode_record import EpisodeRecord
@@ -60,17 +64,25 @@ RAY_INSTALL_HINT = "pip install -e '.[ray]'"
 """How to install the extra (printed when Ray is missing)."""
 
 LOST_WORKER_RETRIES = 2
-"""An episode whose worker is lost is queued again at most this many times, then recorded as an
-error (the local pool records it at once)."""
+"""A job whose worker is lost is queued again at most this many times, then ends as an error
+(the local pools record the error at once)."""
 
 LOCAL_OBJECT_STORE_BYTES = 128 * 1024**2
-"""Object store of a local Ray instance [bytes]: only records travel through it (a few kB each);
-Ray's default (30 % of memory) would reserve shared memory for nothing."""
+"""Object store of a private local Ray instance [bytes]: results are small (a record: a few kB;
+a collected episode: a few MB, passed on at once); Ray's default (30 % of memory) would reserve
+shared memory for nothing."""
 
 CLOSE_TIMEOUT_S = 30.0
 """Time actors get to close their envs at the end of a run before they are killed [s]."""
 
 _THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
+
+J = TypeVar("J")
+"""A job type."""
+R = TypeVar("R")
+"""A result type."""
+_J_in = TypeVar("_J_in", contravariant=True)
+_R_out = TypeVar("_R_out", covariant=True)
 
 
 def require_ray() -> ModuleType:
@@ -85,30 +97,39 @@ def require_ray() -> ModuleType:
     return ray
 
 
-class EpisodeActor:
-    """What one Ray actor holds: the same :class:`EpisodeExecutor` a local worker process holds.
+class Executor(Protocol[_J_in, _R_out]):
+    """What an actor holds: built once from a config, plays jobs, closes its envs."""
 
-    Built with the driver's ``sys.path`` so it imports what the driver can (as a spawned local
+    def play(self, job: _J_in) -> _R_out: ...
+
+    def close(self) -> None: ...
+
+
+class PoolActor:
+    """One Ray actor: ``build(config)`` (an executor class or factory, importable by the actor).
+
+    Made with the driver's ``sys.path`` so it imports what the driver can (as a spawned local
     worker does); on a cluster every node needs the project at the same path.
     """
 
-    def __init__(self, config: WorkerConfig, sys_path: Sequence[str]) -> None:
+    def __init__(self, build: Callable[[Any], Executor], config: Any, sys_path: Sequence[str]):
         missing = [p for p in sys_path if p and p not in sys.path and os.path.isdir(p)]
         sys.path[:0] = missing
         for name in _THREAD_VARS:
             os.environ[name] = "1"  # before torch/numpy are imported by the env or the policy
+        self._build = build
         self._config = config
-        self._executor: EpisodeExecutor | None = None
+        self._executor: Executor | None = None
 
     def start(self) -> tuple[str, Any, str]:
-        """Build the envs: ``("ready", pid, host)``, or ``("fatal", message, traceback)``."""
+        """Build the executor: ``("ready", pid, host)``, or ``("fatal", message, traceback)``."""
         try:
-            self._executor = EpisodeExecutor(self._config)
-        except BaseException as exc:  # reported to the driver, which stops the sweep
+            self._executor = self._build(self._config)
+        except BaseException as exc:  # reported to the driver, which stops the run
             return ("fatal", f"{type(exc).__name__}: {exc}", traceback.format_exc())
         return ("ready", os.getpid(), socket.gethostname())
 
-    def play(self, job: Job) -> EpisodeRecord:
+    def play(self, job: Any) -> Any:
         assert self._executor is not None, "start() first"
         return self._executor.play(job)
 
@@ -129,33 +150,47 @@ class _Slot:
     since: float
     """When the call in flight was made (``time.monotonic()``) [s]."""
     first_generation: bool
-    """Started with the pool (counts towards :attr:`RayWorkerPool.startup_s`)."""
+    """Started with the run (counts towards :attr:`RayActorPool.startup_s`)."""
     ready: bool = False
     """``start`` returned: the actor holds its envs."""
-    job: Job | None = None
+    job: Any = None
     """The job being played."""
     pid: int | None = None
     """The actor's process id (once ready)."""
 
 
-class RayWorkerPool:
-    """Run jobs on ``workers`` Ray actors, calling ``on_result`` on the driver as records arrive.
+class RayActorPool(Generic[J, R]):
+    """Run jobs on ``workers`` Ray actors, each holding ``build(config)``; ``on_result`` gets one
+    result per job on the driver, in arrival order.
 
-    ``address=None`` starts a private local Ray instance (``ray.init(address="local")``) with
-    ``max(workers, cpu_count)`` CPUs; otherwise it joins the cluster at ``address`` (``"auto"``,
-    ``"HOST:6379"``, ``"ray://HOST:10001"``). If Ray is already initialized in this process it is
-    used as it is. A Ray instance the pool started is shut down by :meth:`close`.
+    ``lost(job, message, elapsed_s)`` makes the error result of a job the watchdog ended or whose
+    workers kept dying. ``address=None`` starts a private local Ray instance
+    (``ray.init(address="local")``, ``max(workers, cpu_count)`` CPUs); otherwise the pool joins the
+    cluster at ``address`` (``"auto"``, ``"HOST:6379"``, ``"ray://HOST:10001"``). If Ray is
+    already initialized in this process it is used as it is. A Ray instance the pool started is
+    shut down by :meth:`close`.
     """
 
     def __init__(
-        self, config: WorkerConfig, workers: int, suite: Suite, *, address: str | None = None
+        self,
+        build: Callable[[Any], Executor[J, R]],
+        config: Any,
+        workers: int,
+        *,
+        lost: Callable[[J, str, float], R],
+        job_timeout_s: float,
+        start_timeout_s: float = 600.0,
+        address: str | None = None,
     ) -> None:
         if workers < 1:
             raise ValueError("workers must be >= 1")
         self._ray = require_ray()
+        self.build = build
         self.config = config
         self.workers = workers
-        self.suite = suite
+        self.lost = lost
+        self.job_timeout_s = job_timeout_s
+        self.start_timeout_s = start_timeout_s
         self.address = address
         self.respawns = 0
         """Actors replaced after a hang or a loss."""
@@ -189,14 +224,14 @@ class RayWorkerPool:
             try:
                 ray.init(**kwargs)
             except (ConnectionError, ValueError, RuntimeError) as exc:
-                where = "a local Ray instance" if self.address is None else self.address
+                where = "a private local instance" if self.address is None else self.address
                 first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
                 raise UsageError(
                     f"cannot start or join Ray at {where}: {first} "
                     "(a cluster is started with `ray start --head`)"
                 ) from exc
             self._owns_ray = True
-        self._actor_cls = ray.remote(num_cpus=1, max_restarts=0)(EpisodeActor)
+        self._actor_cls = ray.remote(num_cpus=1, max_restarts=0)(PoolActor)
         self.connect_s = time.perf_counter() - t0
 
     def close(self) -> None:
@@ -205,19 +240,21 @@ class RayWorkerPool:
             self._ray.shutdown()
         self._owns_ray = False
 
-    def __enter__(self) -> RayWorkerPool:
+    def __enter__(self) -> RayActorPool[J, R]:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
 
+    @property
+    def pids(self) -> list[int]:
+        """Process ids of the ready actors of the current :meth:`run` (tests, fault drills)."""
+        return [s.pid for s in self._slots if s.ready and s.pid is not None]
+
     # --- scheduling ----------------------------------------------------------------------------
 
-    def _family(self, job: Job) -> str:
-        return self.suite.task(job.spec.task).family
-
     def _spawn(self, first_generation: bool) -> _Slot:
-        handle = self._actor_cls.remote(self.config, list(sys.path))
+        handle = self._actor_cls.remote(self.build, self.config, list(sys.path))
         return _Slot(handle, handle.start.remote(), time.monotonic(), first_generation)
 
     def _respawn(self, slot: _Slot) -> _Slot:
@@ -225,36 +262,35 @@ class RayWorkerPool:
         self.respawns += 1
         return self._spawn(first_generation=False)
 
-    def _dispatch(self, slot: _Slot, queue: deque[Job]) -> None:
+    def _dispatch(self, slot: _Slot, queue: deque[J]) -> None:
         """Hand ``slot`` the next queued job if it is ready and idle."""
         if slot.ready and slot.job is None and queue:
             slot.job = queue.popleft()
             slot.since = time.monotonic()
             slot.ref = slot.handle.play.remote(slot.job)
 
-    def _lost(self, slot: _Slot, message: str) -> EpisodeRecord:
-        assert slot.job is not None
-        return error_record(
-            slot.job, self._family(slot.job), message, time.monotonic() - slot.since
-        )
+    def _give_up(
+        self, slot: _Slot, message: str, queue: deque[J], on_result: Callable[[R], Any]
+    ) -> None:
+        follow = on_result(self.lost(slot.job, message, time.monotonic() - slot.since))
+        queue.extend(follow or ())
 
-    def run(self, jobs: Sequence[Job], on_result: Callable[[EpisodeRecord], None]) -> None:
-        """Play every job once; ``on_result`` gets exactly one record per job, in arrival order."""
+    def run(self, jobs: Sequence[J], on_result: Callable[[R], Iterable[J] | None]) -> None:
+        """Play every job (and every follow-up job ``on_result`` returns) once."""
         ray = self._ray
         t_start = time.monotonic() - self.connect_s
-        queue: deque[Job] = deque(jobs)
+        queue: deque[J] = deque(jobs)
         losses: Counter[int] = Counter()  # by id(job): a lost job is queued again as is
         slots = [self._spawn(first_generation=True) for _ in range(min(self.workers, len(jobs)))]
         self._slots = slots
         waiting_first = len(slots)
-        timeout_episode = self.config.episode_timeout_s
         try:
             while queue or any(s.job is not None for s in slots):
                 for slot in slots:
                     self._dispatch(slot, queue)
                 now = time.monotonic()
                 deadlines = [
-                    s.since + (timeout_episode if s.ready else self.config.start_timeout_s)
+                    s.since + (self.job_timeout_s if s.ready else self.start_timeout_s)
                     for s in slots
                     if s.ref is not None
                 ]
@@ -274,22 +310,18 @@ class RayWorkerPool:
                 now = time.monotonic()
                 starting = [s for s in slots if not s.ready]
                 if starting and len(starting) == len(slots):
-                    oldest = min(s.since for s in starting)
-                    if now > oldest + self.config.start_timeout_s:
+                    if now > min(s.since for s in starting) + self.start_timeout_s:
                         raise WorkerStartError(
-                            f"no Ray actor built its env within "
-                            f"{self.config.start_timeout_s:.0f} s (cluster resources: "
-                            f"{ray.available_resources()}); check `python -m awda_bench doctor` "
-                            "on the nodes"
+                            f"no Ray actor started within {self.start_timeout_s:.0f} s "
+                            f"(free resources: {ray.available_resources()}); check "
+                            "`python -m awda_bench doctor` on the nodes"
                         )
                 for i, slot in enumerate(slots):
-                    if slot.job is not None and now > slot.since + timeout_episode:
-                        on_result(
-                            self._lost(
-                                slot,
-                                f"watchdog: episode exceeded {timeout_episode:g} s; worker killed",
-                            )
+                    if slot.job is not None and now > slot.since + self.job_timeout_s:
+                        message = (
+                            f"watchdog: episode exceeded {self.job_timeout_s:g} s; worker killed"
                         )
+                        self._give_up(slot, message, queue, on_result)
                         slots[i] = self._respawn(slot)
         finally:
             if waiting_first:
@@ -300,36 +332,38 @@ class RayWorkerPool:
         self,
         slot: _Slot,
         ref: Any,
-        queue: deque[Job],
+        queue: deque[J],
         losses: Counter[int],
-        on_result: Callable[[EpisodeRecord], None],
+        on_result: Callable[[R], Iterable[J] | None],
     ) -> _Slot:
         exceptions = self._ray.exceptions
         try:
             value = self._ray.get(ref)
         except exceptions.RayTaskError as exc:
-            # the call raised past EpisodeExecutor.play's own handler (SystemExit, ...): keep it
+            # raised past the executor's own handler (SystemExit, ...): an error, kept
             if slot.job is None:
                 raise WorkerStartError(f"a Ray actor failed while starting: {exc}") from exc
-            on_result(self._lost(slot, f"worker raised outside the episode:\n{exc}"))
+            self._give_up(slot, f"worker raised outside the episode:\n{exc}", queue, on_result)
             return self._respawn(slot)
-        except exceptions.RayError as exc:  # actor process or node lost
+        except exceptions.RayError as exc:  # the actor's process or node is gone
             if slot.job is None:
                 raise WorkerStartError(
-                    f"a Ray actor died before building its env: {type(exc).__name__}"
+                    f"a Ray actor died before building its env ({type(exc).__name__})"
                 ) from exc
-            job = slot.job
-            losses[id(job)] += 1
-            if losses[id(job)] > LOST_WORKER_RETRIES:
-                on_result(
-                    self._lost(
-                        slot,
-                        f"worker lost {losses[id(job)]} times during this episode "
-                        f"(last: {type(exc).__name__})",
-                    )
+            losses[id(slot.job)] += 1
+            lost = losses[id(slot.job)]
+            if lost > LOST_WORKER_RETRIES:
+                message = (
+                    f"worker lost {lost} times during this episode (last: {type(exc).__name__})"
                 )
+                self._give_up(slot, message, queue, on_result)
             else:
-                queue.appendleft(job)
+                print(
+                    f"warning: a Ray worker was lost ({type(exc).__name__}); its episode is "
+                    "queued again",
+                    file=sys.stderr,
+                )
+                queue.appendleft(slot.job)
                 self.requeued += 1
             return self._respawn(slot)
         if not slot.ready:
@@ -338,10 +372,10 @@ class RayWorkerPool:
             slot.ready, slot.pid = True, int(value[1])
             self._dispatch(slot, queue)
             return slot
-        # hand the actor its next job before storing this result: it plays while we write
+        # hand the actor its next job before this result is handled: it plays while we write
         slot.job = None
         self._dispatch(slot, queue)
-        on_result(value)
+        queue.extend(on_result(value) or ())
         return slot
 
     def _stop(self, slots: list[_Slot]) -> None:
@@ -353,7 +387,25 @@ class RayWorkerPool:
         for slot in slots:
             ray.kill(slot.handle, no_restart=True)
 
-    @property
-    def pids(self) -> list[int]:
-        """Process ids of the ready actors of the current :meth:`run` (tests, fault drills)."""
-        return [s.pid for s in self._slots if s.ready and s.pid is not None]
+
+class RayWorkerPool(RayActorPool[Job, EpisodeRecord]):
+    """The evaluation pool on Ray: actors hold an :class:`EpisodeExecutor` (one env per env id,
+    the policy cached per snapshot), exactly like a local worker; same interface as
+    :class:`~awda_bench.harness.worker_pool.WorkerPool`."""
+
+    def __init__(
+        self, config: WorkerConfig, workers: int, suite: Suite, *, address: str | None = None
+    ) -> None:
+        self.suite = suite
+        super().__init__(
+            EpisodeExecutor,
+            config,
+            workers,
+            lost=self._error_record,
+            job_timeout_s=config.episode_timeout_s,
+            start_timeout_s=config.start_timeout_s,
+            address=address,
+        )
+
+    def _error_record(self, job: Job, message: str, elapsed_s: float) -> EpisodeRecord:
+        return error_record(job, self.suite.task(job.spec.task).family, message, elapsed_s)
