@@ -391,3 +391,111 @@ def test_replay_without_a_trajectory_is_one_line(
     assert "need an existing .h5 trajectory file" in err and len(err.splitlines()) == 1
     assert main(["replay"]) == 2
     assert "replay needs --traj-path" in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- scheduling (fast)
+def _fake_episode(job, success: bool):
+    from awda_bench.data.recorder import EpisodeData, encode_jpeg
+
+    T = 3
+    frame = np.full((64, 80, 3), job.attempt * 10 % 255, dtype=np.uint8)
+    return EpisodeData(
+        job=job,
+        success=success,
+        actions=np.zeros((T, 4), np.float32),
+        success_steps=np.full(T, success),
+        rgb_jpeg=[encode_jpeg(frame, 90)] * (T + 1),
+        obs={"extra": {"tcp_pose": np.zeros((T + 1, 7), np.float32)}},
+        env_states={"actors": {"cube": np.zeros((T + 1, 13), np.float32)}},
+        attributes={"grasp": np.zeros(T, bool), "press": np.zeros(T, bool)},
+        truth={"grasp": np.zeros(T, bool)},
+        meta={"episode_seed": job.seed, "elapsed_steps": T, "success": success},
+        env_info={"env_id": "AWDA-PickPlace-v1", "env_kwargs": {}, "max_episode_steps": 300},
+    )
+
+
+class FakeRunner:
+    """Plays jobs in order without simulation: attempts in ``fail`` are discarded, attempts in
+    ``error`` raise (an error result)."""
+
+    def __init__(self, fail: set[int] = frozenset(), error: set[int] = frozenset()) -> None:
+        self.fail, self.error, self.played = fail, error, []
+
+    def run(self, jobs, on_result) -> None:
+        from collections import deque
+
+        from awda_bench.data.pool import JobResult
+
+        queue = deque(jobs)
+        while queue:
+            job = queue.popleft()
+            self.played.append((job.role, job.attempt))
+            if job.attempt in self.error:
+                queue.extend(on_result(JobResult(job=job, error="Traceback\nRuntimeError: boom")))
+            else:
+                queue.extend(
+                    on_result(
+                        JobResult(job=job, data=_fake_episode(job, job.attempt not in self.fail))
+                    )
+                )
+
+
+def _fake_config(out: Path, **kw) -> CollectConfig:
+    base = dict(
+        suite="pick_place",
+        split="train",
+        embodiment="agent",
+        episodes_per_task=3,
+        out=out,
+        tasks=(0,),
+        progress=False,
+    )
+    return CollectConfig(**{**base, **kw})
+
+
+def test_failed_attempts_are_replaced_and_counted(tmp_path: Path) -> None:
+    runner = FakeRunner(fail={1, 3})
+    result = run_collect(_fake_config(tmp_path), runner=runner)
+    assert result.complete and result.kept == 3 and result.discarded == 2 and result.errors == 0
+    # attempts 0, 1, 2 first; 1 failed -> 3; 3 failed -> 4
+    assert runner.played == [("agent", 0), ("agent", 1), ("agent", 2), ("agent", 3), ("agent", 4)]
+    meta = json.loads((tmp_path / "agent/pick_place/task_00.json").read_text())
+    assert [e["episode_id"] for e in meta["episodes"]] == [0, 1, 2]
+    assert [d["attempt"] for d in meta["discarded"]] == [1, 3]
+    manifest = json.loads((tmp_path / MANIFEST).read_text())
+    assert manifest["counts"]["discarded"] == 2 and manifest["counts"]["kept"] == 3
+    with h5py.File(tmp_path / "agent/pick_place/task_00.h5", "r") as f:
+        assert sorted(f.keys()) == ["traj_0", "traj_1", "traj_2"]
+        # traj_1 is attempt 2 (attempt 1 was discarded)
+        assert decode_jpeg(f["traj_1/obs/sensor_data/third_person/rgb_jpeg"][0])[0, 0, 0] in range(
+            15, 26
+        )
+
+
+def test_errors_are_kept_apart_and_retried_on_rerun(tmp_path: Path) -> None:
+    first = run_collect(_fake_config(tmp_path), runner=FakeRunner(error={1}))
+    assert first.errors == 1 and first.kept == 2 and first.discarded == 0 and not first.complete
+    assert "attempt 1: RuntimeError: boom" in first.error_messages[0]
+    assert json.loads((tmp_path / MANIFEST).read_text())["complete"] is False
+    again = FakeRunner()
+    second = run_collect(_fake_config(tmp_path), runner=again)
+    assert again.played == [("agent", 1)]  # only the errored attempt is re-recorded
+    assert second.complete and second.already == 2 and second.kept == 1
+
+
+def test_a_task_the_expert_always_fails_gives_up(tmp_path: Path) -> None:
+    config = _fake_config(tmp_path, episodes_per_task=1, max_attempts_factor=1)
+    result = run_collect(config, runner=FakeRunner(fail=set(range(100))))
+    assert not result.complete and result.kept == 0 and result.discarded == 11
+    assert result.errors == 1 and "gave up after 11 attempts" in result.error_messages[0]
+
+
+def test_quick_is_two_tasks_two_episodes(tmp_path: Path) -> None:
+    from awda_bench.cli import build_parser
+    from awda_bench.commands.collect import config_from_args
+
+    args = build_parser().parse_args(
+        ["collect", "--suite", "pick_place", "--quick", "--synthesize", "9", "--out", str(tmp_path)]
+    )
+    config = config_from_args(args)
+    assert config.tasks == (0, 1) and config.episodes_per_task == 2 and config.synthesize == 2
