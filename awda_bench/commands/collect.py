@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -13,12 +14,15 @@ from awda_bench.data.config import (
     CollectConfig,
     parse_image_size,
 )
+from awda_bench.harness.backends import BACKENDS
 from awda_bench.suites import SUITES_DIR
 
 QUICK_EPISODES = 2
 """``--quick``: episodes per task."""
 QUICK_TASKS = 2
 """``--quick``: the first this-many tasks of the split."""
+DEFAULT_WORKERS = max(1, min(os.cpu_count() or 1, 4))
+"""Worker processes when ``--workers`` is not given (as ``run``)."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -43,7 +47,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="successful episodes kept per task and embodiment (default 20; reference 100)",
     )
     parser.add_argument("--out", type=Path, required=True, help="DATA_DIR")
-    parser.add_argument("--workers", type=int, default=1, help="worker processes (0: inline)")
+    parser.add_argument(
+        "--workers", type=int, default=1, help="worker processes or Ray actors (0: inline)"
+    )
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default=BACKENDS[0],
+        help="where --workers run: local processes, or Ray actors (a private local Ray instance, "
+        "or the cluster at --ray-address; needs the 'ray' extra); default local",
+    )
+    parser.add_argument(
+        "--ray-address",
+        metavar="ADDRESS",
+        help="join this Ray cluster (HOST:6379, 'auto', ray://HOST:10001) with --backend ray",
+    )
     parser.add_argument(
         "--image-size",
         default="x".join(map(str, DEFAULT_IMAGE_SIZE)),
@@ -90,6 +108,8 @@ def config_from_args(args: argparse.Namespace) -> CollectConfig:
         episodes_per_task=episodes,
         out=args.out,
         workers=args.workers,
+        backend=args.backend,
+        ray_address=args.ray_address,
         image_size=parse_image_size(args.image_size),
         seed=args.seed,
         synthesize=synthesize,

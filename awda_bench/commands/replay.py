@@ -9,7 +9,8 @@ awda_bench.envs``) and hands every argument after ``replay`` to ManiSkill's tool
     python -m awda_bench replay --help                                # ManiSkill's own options
 
 With ``--num-envs N > 1`` ManiSkill forks N processes, which inherit the registration.
-Synthesized trajectories do not solve their task: replay them with ``--allow-failure``.
+Synthesized trajectories solve no task, and pressed buttons pop back before the end (ManiSkill
+judges success after the last step): replay those with ``--allow-failure``.
 """
 
 from __future__ import annotations

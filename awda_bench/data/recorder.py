@@ -46,7 +46,8 @@ class EpisodeData:
 
     job: CollectJob
     success: bool
-    """Kept or discarded: the task's success at the end (synthesis: every waypoint reached)."""
+    """Kept or discarded: the task succeeded at some step (``success_once``; synthesis: every
+    waypoint reached). The JSON's ``success`` stays ManiSkill's: success after the last step."""
     actions: np.ndarray
     """(T, 4) float32 env actions."""
     success_steps: np.ndarray
@@ -248,7 +249,11 @@ class EpisodeRecorder:
                 settle += 1
                 if settle > SETTLE_STEPS:
                     break
-        success = bool(np.asarray(_numpy(rec.last_info["success"])).reshape(-1)[0])
+        # kept if the task was achieved during the episode (the evaluation's default metric):
+        # pressed buttons pop back, so success at the end would discard every press episode
+        info = rec.last_info
+        key = "success_once" if "success_once" in info else "success"
+        success = bool(np.asarray(_numpy(info[key])).reshape(-1)[0])
         return success, {"expert_done": bool(expert.done)}
 
     def _play_synthesis(self, env: Any, rec: _Recording, seed: int) -> tuple[bool, dict[str, Any]]:
