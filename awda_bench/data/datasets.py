@@ -133,6 +133,11 @@ class CollectedData:
         self._pid = os.getpid()
 
     @property
+    def fingerprint(self) -> str:
+        """The collection's fingerprint (what a training snapshot records about its data)."""
+        return str(self.manifest.get("fingerprint", ""))
+
+    @property
     def split(self) -> str:
         return str(self.manifest.get("definition", {}).get("split", ""))
 
