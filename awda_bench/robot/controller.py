@@ -6,8 +6,9 @@ Seated where ManiSkill seats its own IK controller: :class:`MinkEEPosController`
 
     a[0:3] in [-1,1] --clip--> delta = a * max_step_m  (world axes, rotated into the base frame)
     p_meas = FK(q_measured)                             (MuJoCo model of the same URDF)
-    p*     = advance_target(p*_prev, p_meas, delta)     (accumulated; workspace box and reach;
-                                                         at most max_lead_m ahead of p_meas)
+    p*     = advance_target(p*_prev, p_meas, delta)     (accumulated: p*_prev kept within
+                                                         max_lag_m of p_meas, + delta; workspace
+                                                         box and reach)
     q*     = mink IK(q*_prev -> p*, gripper pointing down, joint limits)
     drives : position target q*, velocity target (q* - q*_prev) * control_freq
 
@@ -26,8 +27,8 @@ Why each piece (``python -m awda_bench bench controller --fidelity``, pick-place
   = 0.01 mm (a 1 mm tolerance was a second dead band); one QP solve per step suffices because
   the residual is removed by the next step's solve toward the same absolute target.
 - Blocked motion (pressing, pushing on the table, workspace clipping) cannot wind up: the target
-  stays within ``max_lead_m`` of the measured TCP; after 20 steps pressing on the table at full
-  scale the TCP rises on the first step of an up command.
+  carries at most ``max_lag_m`` past the measured TCP into the next step; after 20 steps pressing
+  on the table at full scale the TCP rises on the first step of an up command.
 
 Whatever is carried from step to step (target, joint targets) is controller state: ``get_state``
 saves it, ``set_state`` restores it (a restored scene continues as the original would), and
@@ -142,7 +143,7 @@ class MinkEEPosController(PDJointPosController):
             delta_base,
             self._low,
             self._high,
-            cfg.max_lead_m,
+            cfg.max_lag_m,
             self._max_reach,
         )
         previous = self.joint_target.copy()
@@ -195,9 +196,9 @@ class MinkEEPosControllerConfig(PDJointPosControllerConfig):
     """Lower corner of the box TCP targets are clipped to, robot base frame [m]."""
     workspace_high_m: tuple[float, float, float] = (0.78, 0.50, 0.55)
     """Upper corner of that box, robot base frame [m]."""
-    max_lead_m: float = 0.03
-    """The TCP target never runs more than this ahead of the measured TCP [m] (blocked motion
-    does not wind up; see :mod:`awda_bench.robot.tcp_target`)."""
+    max_lag_m: float = 0.01
+    """The target carries at most this far past the measured TCP into the next step [m]
+    (blocked motion does not wind up; see :mod:`awda_bench.robot.tcp_target`)."""
     velocity_feedforward: float = 1.0
     """Joint velocity targets = this x (joint-target change per control step) / control period."""
     max_reach_xy_m: float = 0.78

@@ -14,7 +14,7 @@ Its controller has the semantics of the agent's ``pd_ee_delta_pos_mink``::
                                   (world axes; no IK needed: the root's three prismatic joints
                                   *are* the TCP translation), clipped to
                                   [workspace_low_m, workspace_high_m] (root-joint coordinates)
-                                  and to max_lead_m from the measured root position
+                                  carrying at most max_lag_m past the measured root position
                                   (:mod:`awda_bench.robot.tcp_target`, as the agent's)
     rotation joints held at their reset values (pointing down)
     action[:, 3] > 0 closes the fingers, <= 0 opens them
@@ -75,7 +75,7 @@ class FloatingDeltaPosController(PDJointPosController):
             commands * cfg.max_step_m,
             np.asarray(cfg.workspace_low_m),
             np.asarray(cfg.workspace_high_m),
-            cfg.max_lead_m,
+            cfg.max_lag_m,
         )
         self._step = 0
         self._target_qpos = self._target_qpos.clone()
@@ -109,9 +109,9 @@ class FloatingDeltaPosControllerConfig(PDJointPosControllerConfig):
 
     max_step_m: float = 0.02
     """TCP displacement of a unit action component in one control step [m] (as the agent's)."""
-    max_lead_m: float = 0.03
-    """The target never runs more than this ahead of the measured root position [m] (as the
-    agent's; :mod:`awda_bench.robot.tcp_target`)."""
+    max_lag_m: float = 0.01
+    """The target carries at most this far past the measured root position into the next step
+    [m] (as the agent's; :mod:`awda_bench.robot.tcp_target`)."""
     workspace_low_m: tuple[float, float, float] = (-0.45, -0.55, 0.11)
     """Lower corner of the box root-joint targets are clipped to [m] (z: TCP 0.7 cm above table)."""
     workspace_high_m: tuple[float, float, float] = (0.30, 0.55, 0.80)

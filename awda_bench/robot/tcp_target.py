@@ -6,10 +6,13 @@ loses whatever the drives lag behind each step: measured on the first controller
 moved the TCP 0.8 cm and 0.4 mm moved it not at all). Two bounds keep the target honest:
 
 - **workspace**: the target is clipped to a box (and a horizontal reach) the robot can reach;
-- **bounded lead**: the target never gets farther than ``max_lead_m`` ahead of the measured TCP.
-  When motion is blocked (pressing a button, pushing on the table, holding a door) the target
-  stops ``max_lead_m`` beyond the contact instead of winding up, so a reversed command moves the
-  TCP again within a step or two, and the contact force stays bounded.
+- **bounded lag**: what the target carries over from earlier steps is kept within ``max_lag_m``
+  of the measured TCP, then this step's ``delta`` is added. In free motion the arm is within a
+  few millimetres of its target at the end of a step, so nothing is clipped and the gain is
+  exactly 1. When motion is blocked (pressing a button, pushing on the table, holding a door)
+  the target stops ``max_lag_m + |delta|`` beyond the contact instead of winding up: a reversed
+  command moves the TCP again on the next step, and the contact force follows the command
+  (a small push presses gently, a full-scale push hard) instead of growing with time.
 """
 
 from __future__ import annotations
@@ -23,20 +26,19 @@ def advance_target(
     delta: np.ndarray,
     low: np.ndarray,
     high: np.ndarray,
-    max_lead_m: float,
+    max_lag_m: float,
     max_reach_xy_m: float = np.inf,
 ) -> np.ndarray:
-    """The next target(s): ``target + delta`` clipped to the workspace and to ``max_lead_m`` from
-    ``measured``. All arrays (..., 3) in one frame [m]; returns a new array."""
-    nxt = np.minimum(np.maximum(target + delta, low), high)
+    """The next target(s): the previous target, kept within ``max_lag_m`` of ``measured``, plus
+    ``delta``, clipped to the workspace box and horizontal reach. All arrays (..., 3) in one
+    frame [m]; returns a new array."""
+    lag = np.asarray(target, dtype=np.float64) - measured
+    distance = np.sqrt((lag**2).sum(axis=-1, keepdims=True))
+    if (distance > max_lag_m).any():
+        lag = np.where(distance > max_lag_m, lag * (max_lag_m / np.maximum(distance, 1e-12)), lag)
+    nxt = np.minimum(np.maximum(measured + lag + delta, low), high)
     radius = np.sqrt(nxt[..., 0] ** 2 + nxt[..., 1] ** 2)
     if (radius > max_reach_xy_m).any():
         scale = np.minimum(1.0, max_reach_xy_m / np.maximum(radius, 1e-12))
         nxt[..., :2] *= scale[..., None]
-    lead = nxt - measured
-    distance = np.sqrt((lead**2).sum(axis=-1, keepdims=True))
-    if (distance > max_lead_m).any():
-        nxt = np.where(
-            distance > max_lead_m, measured + lead * (max_lead_m / np.maximum(distance, 1e-12)), nxt
-        )
     return nxt
