@@ -5,6 +5,7 @@ when Ray is missing. Every test starts (and stops) its own Ray instance: ~3-5 s 
 
 from __future__ import annotations
 
+import hashlib
 import os
 import signal
 import sqlite3
@@ -304,3 +305,35 @@ def test_bench_harness_times_ray_beside_local(tmp_path: Path, suites: Path, caps
     assert code == 0, out
     assert "ray vs local, 2 workers:" in out
     assert "identical per-episode outcomes across backends and worker counts: yes" in out
+
+
+@pytest.mark.slow
+def test_collect_on_ray_writes_the_same_files_as_local(tmp_path: Path) -> None:
+    args = [
+        "collect",
+        "--suite",
+        "pick_place",
+        "--embodiment",
+        "agent",
+        "--episodes-per-task",
+        "1",
+        "--task",
+        "0",
+        "--synthesize",
+        "1",
+        "--image-size",
+        "64x80",
+        "--no-progress",
+    ]
+    assert main([*args, "--out", str(tmp_path / "local"), "--workers", "0"]) == 0
+    assert main([*args, "--out", str(tmp_path / "ray"), "--workers", "2", "--backend", "ray"]) == 0
+    digests = [
+        {
+            str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(root.rglob("*"))
+            if p.is_file()
+        }
+        for root in (tmp_path / "local", tmp_path / "ray")
+    ]
+    assert "manifest.json" in digests[0] and len(digests[0]) > 2
+    assert digests[1] == digests[0]  # frame for frame, byte for byte

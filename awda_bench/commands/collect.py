@@ -48,7 +48,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     parser.add_argument("--out", type=Path, required=True, help="DATA_DIR")
     parser.add_argument(
-        "--workers", type=int, default=1, help="worker processes or Ray actors (0: inline)"
+        "--workers",
+        type=int,
+        default=DEFAULT_WORKERS,
+        help=f"worker processes or Ray actors, 0 = in this process (default {DEFAULT_WORKERS})",
     )
     parser.add_argument(
         "--backend",

@@ -260,13 +260,19 @@ def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> Colle
     t0 = time.perf_counter()
     try:
         if jobs:
-            if runner is None:
-                runner = (
-                    InlineRunner(config)
-                    if config.workers == 0
-                    else ProcessRunner(config, config.workers)
-                )
-            runner.run(jobs, on_result)
+            if runner is None and config.backend == "ray":
+                from awda_bench.data.ray_runner import RayJobRunner
+
+                with RayJobRunner(config, config.workers, address=config.ray_address) as ray_runner:
+                    ray_runner.run(jobs, on_result)
+            else:
+                if runner is None:
+                    runner = (
+                        InlineRunner(config)
+                        if config.workers == 0
+                        else ProcessRunner(config, config.workers)
+                    )
+                runner.run(jobs, on_result)
     finally:
         bar.close()
         result.wall_s = time.perf_counter() - t0

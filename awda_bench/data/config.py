@@ -99,7 +99,11 @@ class CollectConfig:
     out: Path
     """DATA_DIR: where shards, trajectory files and ``manifest.json`` go."""
     workers: int = 1
-    """Worker processes (0: record in this process)."""
+    """Worker processes or Ray actors (0: record in this process; local backend only)."""
+    backend: str = "local"
+    """Where workers run: ``"local"`` processes or ``"ray"`` actors (not part of the data)."""
+    ray_address: str | None = None
+    """Ray cluster to join with ``backend="ray"``; ``None`` starts a private local instance."""
     image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE
     """Third-person frame (height, width) [px]."""
     depth_size: tuple[int, int] = DEFAULT_DEPTH_SIZE
@@ -136,6 +140,9 @@ class CollectConfig:
             raise UsageError("nothing to collect: give --episodes-per-task > 0 or --synthesize > 0")
         if self.workers < 0:
             raise UsageError(f"--workers must be >= 0, got {self.workers}")
+        from awda_bench.harness.backends import check_backend
+
+        check_backend(self.backend, self.workers, self.ray_address)
         if self.seed < 0:
             raise UsageError(f"--seed must be >= 0, got {self.seed}")
         if not 1 <= self.jpeg_quality <= 100:
