@@ -19,7 +19,7 @@ a longer look-ahead only delays the onset) and delta = -0.01 m (between the 0.00
 settling step without shifting the onset or the release by more than a step.
 ``min_opening_m`` (an addition to the reference formula, documented as such): a jaw that is already
 fully shut also "does not shrink", so steps with ``s^g_t < min_opening_m`` are not grasps (the
-reference formula is ``min_opening_m = 0``; our thinnest object is 2.5 cm wide).
+reference formula is ``min_opening_m = 0``; see the field for the measured margins).
 Measured agreement with simulator truth: ``python -m awda_bench bench primitives --measure mining``.
 
 Pressing attribute (commanded motion, no end-effector motion), per step ``t < T-1``::
@@ -54,8 +54,11 @@ class GraspMiningConfig:
     (reference: -0.05 / -0.07 in their normalized units)."""
     smooth_steps: int = 3
     """Taps of the box filter (odd); 1 disables smoothing."""
-    min_opening_m: float = 0.005
-    """Jaws shut tighter than this [m] hold nothing (0 = the reference formula)."""
+    min_opening_m: float = 0.01
+    """Jaws shut tighter than this [m] hold nothing (0 = the reference formula). Measured with the
+    tracking controller: the narrowest true grasp (a nut's handle) holds the jaws 12.7 mm apart;
+    closed fingers pushing a button or a door are spread up to 7.4 mm by the contact, which a
+    5 mm guard read as grasps (press-button grasp precision 0)."""
 
     def __post_init__(self) -> None:
         if self.lookahead_steps < 1:

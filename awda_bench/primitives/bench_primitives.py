@@ -9,9 +9,10 @@ Measures (``--measure``, default ``all``):
 ``localization``  random scenes (task cycled over 0-15), the TCP driven to 15-30 cm above the
                   target's top (uniform), one wrist depth frame, xy error of the localized
                   position to the target's true centre: distribution and the share within 1.5 cm.
-``mining``        expert trajectories of the agent on the training tasks (0-13 cycled): per-step
-                  precision and recall of the mined grasp attribute against simulator contact
-                  truth (``is_grasping_target``); pressing is not measured (no press-button suite).
+``mining``        expert trajectories of both embodiments (pick_place: training tasks cycled;
+                  mosaic: every variation cycled): per-step precision and recall of the mined
+                  grasp and pressing attributes against simulator truth (finger contact on the
+                  target; the button pushed down by the fingers), per family.
 """
 
 from __future__ import annotations
@@ -147,40 +148,62 @@ def measure_localization(suite: Any, env: Any, scenes: int, seed: int) -> dict[s
 
 
 def measure_mining(suite: Any, demos: int, seed: int) -> dict[str, float]:
-    from awda_bench.demo_recording import make_demo_env, record_demo
-    from awda_bench.mining import GraspMiningConfig, PrecisionRecall, mine_grasp, precision_recall
+    """Per-step precision/recall of the mined attributes against simulator truth, per embodiment
+    and family: grasp on every task with a grasp truth, pressing where the env reports ``press``.
 
-    env = make_demo_env(suite, "agent")
-    train = [t.index for t in suite.train_tasks]
-    configs = {
-        "default (d=1, delta=-0.01, 3 taps, guard 5 mm)": GraspMiningConfig(),
-        "reference formula (guard off)": GraspMiningConfig(min_opening_m=0.0),
-        "no smoothing": GraspMiningConfig(smooth_steps=1),
-        "d=2": GraspMiningConfig(lookahead_steps=2),
-    }
-    totals: dict[str, PrecisionRecall | None] = dict.fromkeys(configs)
-    for i in range(demos):
-        task = train[i % len(train)]
-        _, traj = record_demo(suite, task, seed + i, embodiment="agent", frames=False, env=env)
-        for name, cfg in configs.items():
-            pr = precision_recall(mine_grasp(traj, cfg), traj.truth["grasp"])
-            so_far = totals[name]
-            totals[name] = pr if so_far is None else so_far + pr
+    ``demos`` expert episodes per embodiment, the suite's tasks cycled (pick_place: its training
+    tasks; mosaic: every variation), seeds from ``seed``."""
+    from awda_bench.demo_recording import demo_env_for, record_demo
+    from awda_bench.experts import EMBODIMENT_NAMES
+    from awda_bench.mining import PrecisionRecall, mine_grasp, mine_press, precision_recall
+
+    tasks = [t.index for t in (suite.train_tasks if suite.name == "pick_place" else suite.tasks)]
+    miners = {"grasp": mine_grasp, "press": mine_press}
+    totals: dict[tuple[str, str, str], PrecisionRecall] = {}
+    envs: dict[tuple[str, str], Any] = {}
+    for embodiment in EMBODIMENT_NAMES:
+        for i in range(demos):
+            task = tasks[i % len(tasks)]
+            env = demo_env_for(envs, suite, task, embodiment)
+            _, traj = record_demo(suite, task, seed + i, embodiment, frames=False, env=env)
+            family = suite.task(task).family
+            for attribute, truth in traj.truth.items():
+                if attribute not in miners:
+                    continue
+                pr = precision_recall(miners[attribute](traj), truth)
+                key = (embodiment, attribute, family)
+                totals[key] = totals[key] + pr if key in totals else pr
+    for opened in envs.values():
+        opened.close()
+    print(f"attribute mining vs simulator truth, {demos} expert trajectories per embodiment:")
     print(
-        f"grasp attribute mining, {demos} agent expert trajectories (tasks {train[0]}-{train[-1]}):"
+        f"  {'embodiment':<14}{'attribute':<10}{'family':<14}{'precision':>10}{'recall':>8}"
+        f"{'TP':>7}{'FP':>6}{'FN':>6}"
     )
-    for name, total in totals.items():
-        assert total is not None
-        pr = total
+    summary: dict[str, float] = {}
+    for (embodiment, attribute, family), pr in sorted(totals.items()):
+        if pr.true_positive + pr.false_negative + pr.false_positive == 0:
+            continue  # this family never has the attribute and nothing was mined
         print(
-            f"  {name:48s} precision {pr.precision:.3f}  recall {pr.recall:.3f}  "
-            f"(TP {pr.true_positive}, FP {pr.false_positive}, FN {pr.false_negative})"
+            f"  {embodiment:<14}{attribute:<10}{family:<14}{pr.precision:>10.3f}{pr.recall:>8.3f}"
+            f"{pr.true_positive:>7}{pr.false_positive:>6}{pr.false_negative:>6}"
         )
-    print("  pressing: not measured (no press-button suite yet)")
-    env.close()
-    first = totals[next(iter(configs))]
-    assert first is not None
-    return {"precision": first.precision, "recall": first.recall}
+    for embodiment in EMBODIMENT_NAMES:
+        for attribute in miners:
+            parts = [v for (e, a, _f), v in totals.items() if e == embodiment and a == attribute]
+            if not parts:
+                continue
+            total = parts[0]
+            for part in parts[1:]:
+                total = total + part
+            print(
+                f"  {embodiment:<14}{attribute:<10}{'all':<14}{total.precision:>10.3f}"
+                f"{total.recall:>8.3f}{total.true_positive:>7}{total.false_positive:>6}"
+                f"{total.false_negative:>6}"
+            )
+            summary[f"{embodiment}_{attribute}_precision"] = total.precision
+            summary[f"{embodiment}_{attribute}_recall"] = total.recall
+    return summary
 
 
 def run_primitives_bench(args: argparse.Namespace) -> int:
