@@ -247,6 +247,21 @@ def test_state_dict_round_trip_restores_everything(env: gym.Env) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("form", ["flat", "dict"])
+def test_reset_to_env_states_restores_everything(env: gym.Env, form: str) -> None:
+    """ManiSkill's ``reset(options={"reset_to_env_states": ...})`` (cached resets, replays):
+    the controller state survives the controller reset ``BaseEnv.reset`` does after restoring."""
+    base = env.unwrapped
+    _save_mid_episode(env, seed=8)
+    saved_dict, saved_obs = base.get_state_dict(), base.get_obs()
+    states = base.get_state() if form == "flat" else saved_dict
+    _disturb(env, seed=8)
+    obs, _ = env.reset(options={"reset_to_env_states": {"env_states": states}})
+    assert_states_equal(saved_dict, base.get_state_dict())
+    assert_obs_equal(saved_obs, obs)
+
+
+@pytest.mark.slow
 def test_restored_scene_continues_like_the_original(env: gym.Env) -> None:
     """Save mid-episode, run on; restore, replay the same actions: same observations (the
     controller state carries everything the controller needs from step to step)."""

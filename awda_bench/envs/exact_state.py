@@ -9,16 +9,18 @@ replaying recorded trajectories, workers reusing one env for many episodes) fall
   flags are silently lost;
 - ``set_state_dict()`` never restores the controller state (the gripper command, a controller's
   accumulated target), so after a restore the observation and the drives keep the last command;
+  ``reset(options={"reset_to_env_states": ...})`` resets the controllers after restoring;
 - an unseeded ``reset()`` draws its randomization from the global torch RNG (unless
   ``enhanced_determinism``), and PhysX keeps each colliding pair's contact cache across resets,
   so an episode's trajectory depends (by ~1e-6 here, then amplified) on the episodes run before
   it in the same process.
 
-This base closes them: ``get_state`` flattens without loss and ``set_state`` is its exact inverse
-(it unflattens the vector along the layout of the current ``get_state_dict()``), ``set_state_dict`` also restores
-the controller (under the state dict's ``"controller"`` key, where ``BaseEnv.get_state_dict`` puts
-it), ``enhanced_determinism`` defaults to on, and :meth:`ExactStateEnv._forget_contact_history`
-lets an episode start from a clean contact state.
+This base closes them: ``get_state`` flattens without loss and ``set_state`` is its exact
+inverse (it unflattens the vector along the layout of the current ``get_state_dict()``);
+``set_state_dict``, and ``reset`` to given env states, also restore the controller (from the state
+dict's ``"controller"`` key, where ``BaseEnv.get_state_dict`` puts it); ``enhanced_determinism``
+defaults to on; and :meth:`ExactStateEnv._forget_contact_history` lets an episode start from a
+clean contact state.
 """
 
 from __future__ import annotations
@@ -160,8 +162,38 @@ class ExactStateEnv(BaseEnv):
         if not self.gpu_sim_enabled and "articulations" in state:
             state["articulations"] = self._restore_unmoved_articulations(state["articulations"])
         super().set_state_dict(state, env_idx)
+        if controller is not None:
+            self._set_controller_state(controller, env_idx)
+
+    def reset(self, seed: Any = None, options: dict | None = None) -> tuple[Any, dict]:
+        """``BaseEnv.reset``; with ``options["reset_to_env_states"]`` the saved controller state
+        is put back after ``BaseEnv.reset`` has reset the controllers (which re-synchronizes them
+        to the measured pose and opens the gripper), and the observation is taken after that."""
+        obs, info = super().reset(seed=seed, options=options)
+        restore = (options or {}).get("reset_to_env_states")
+        if restore is None:
+            return obs, info
+        states = restore["env_states"]
+        if not isinstance(states, Mapping):
+            states = unflatten_state(
+                torch.as_tensor(states, device=self.device), self.get_state_dict()
+            )
+        controller = states.get("controller")
         if controller is None:
-            return
+            return obs, info
+        env_idx = (options or {}).get("env_idx")
+        self._set_controller_state(
+            controller, None if env_idx is None else torch.as_tensor(env_idx, device=self.device)
+        )
+        if restore.get("obs") is None:
+            info = {**info, **self.get_info()}
+            obs = self.get_obs(info)
+            self._last_obs = obs
+        return obs, info
+
+    def _set_controller_state(
+        self, controller: Mapping[str, Any], env_idx: torch.Tensor | None
+    ) -> None:
         if env_idx is None or len(env_idx) == self.num_envs:
             self.agent.set_controller_state(controller)
         else:
