@@ -61,7 +61,7 @@ class PressButtonExpertConfig:
     z_tolerance_m: float = 0.006
     """Vertical goal tolerance [m]."""
     phase_budget_steps: int = 90
-    """Most control steps any moving phase may take (the agent tracks ~8 mm per full step)."""
+    """Most control steps any moving phase may take (a full step moves the TCP 2 cm)."""
 
     def __post_init__(self) -> None:
         check_config(
