@@ -26,7 +26,8 @@ def test_suite_file_defines_16_tasks_with_held_out_can_tasks() -> None:
     assert {t.family for t in suite.tasks} == {"pick_place"}
     assert all(t.name.startswith("can") for t in suite.eval_tasks)
     assert (suite.camera.height, suite.camera.width) == (240, 320)
-    assert suite.control_freq_hz == 20 and suite.horizon_steps >= 200
+    # about twice the longest scripted expert episode (86 steps, demonstrator; tasks/pick_place.toml)
+    assert suite.control_freq_hz == 20 and 150 <= suite.horizon_steps <= 250
 
 
 def test_objects_match_spec_sizes() -> None:

@@ -1,8 +1,7 @@
 """AWDA-Basketball-v1: put one of 3 balls through one of 4 hoops (SPEC §3.2, 12 variations).
 
-Horizon: 300 control steps (15 s at 20 Hz). The scripted expert
-(:mod:`awda_bench.experts.basketball`) needed at most 190 steps with the Panda agent and 91 with
-the demonstrator over seeds 0-9 of every variation.
+Horizon: 200 control steps (10 s at 20 Hz), the MOSAIC suite's (``tasks/mosaic.toml``: about
+twice the longest scripted expert episode of any family with the tracking controller).
 """
 
 from __future__ import annotations
@@ -105,7 +104,7 @@ class BasketballLayout:
                     )
 
 
-@register_env("AWDA-Basketball-v1", max_episode_steps=300)
+@register_env("AWDA-Basketball-v1", max_episode_steps=200)
 class BasketballEnv(AWDATaskEnv):
     """
     **Task Description:**

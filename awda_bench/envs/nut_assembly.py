@@ -1,8 +1,7 @@
 """AWDA-NutAssembly-v1: put one of 3 nuts onto one of 3 pegs (SPEC §3.2, 9 variations).
 
-Horizon: 300 control steps (15 s at 20 Hz). The scripted expert
-(:mod:`awda_bench.experts.nut_assembly`) needed at most 173 steps with the Panda agent and 84 with
-the demonstrator over seeds 0-9 of every variation.
+Horizon: 200 control steps (10 s at 20 Hz), the MOSAIC suite's (``tasks/mosaic.toml``: about
+twice the longest scripted expert episode of any family with the tracking controller).
 """
 
 from __future__ import annotations
@@ -141,7 +140,7 @@ class NutAssemblyLayout:
                     )
 
 
-@register_env("AWDA-NutAssembly-v1", max_episode_steps=300)
+@register_env("AWDA-NutAssembly-v1", max_episode_steps=200)
 class NutAssemblyEnv(AWDATaskEnv):
     """
     **Task Description:**

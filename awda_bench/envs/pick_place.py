@@ -52,7 +52,7 @@ class PickPlaceLayout:
     """Success: the target's centre at most this far above the compartment floor [m]."""
 
 
-@register_env("AWDA-PickPlace-v1", max_episode_steps=300)
+@register_env("AWDA-PickPlace-v1", max_episode_steps=180)
 class PickPlaceEnv(AWDATaskEnv):
     """
     **Task Description:**

@@ -206,7 +206,7 @@ def build_button_panel(
     return panel
 
 
-@register_env("AWDA-PressButton-v1", max_episode_steps=160)
+@register_env("AWDA-PressButton-v1", max_episode_steps=200)
 class PressButtonEnv(AWDATaskEnv):
     """
     **Task Description:**

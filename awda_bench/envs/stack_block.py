@@ -75,7 +75,7 @@ class StackBlockLayout:
         )
 
 
-@register_env("AWDA-StackBlock-v1", max_episode_steps=250)
+@register_env("AWDA-StackBlock-v1", max_episode_steps=200)
 class StackBlockEnv(AWDATaskEnv):
     """
     **Task Description:**
