@@ -19,9 +19,13 @@ from __future__ import annotations
 
 import argparse
 import time
-from typing import Any
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from awda_bench.trajectory import Trajectory
 
 MEASURES = ("episodes", "localization", "mining")
 
@@ -158,7 +162,10 @@ def measure_mining(suite: Any, demos: int, seed: int) -> dict[str, float]:
     from awda_bench.mining import PrecisionRecall, mine_grasp, mine_press, precision_recall
 
     tasks = [t.index for t in (suite.train_tasks if suite.name == "pick_place" else suite.tasks)]
-    miners = {"grasp": mine_grasp, "press": mine_press}
+    miners: dict[str, Callable[[Trajectory], np.ndarray]] = {
+        "grasp": mine_grasp,
+        "press": mine_press,
+    }
     totals: dict[tuple[str, str, str], PrecisionRecall] = {}
     envs: dict[tuple[str, str], Any] = {}
     for embodiment in EMBODIMENT_NAMES:
