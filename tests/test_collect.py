@@ -196,12 +196,8 @@ def test_collection_is_maniskill_trajectory_files(tiny: Path) -> None:
     manifest = json.loads((tiny / MANIFEST).read_text())
     assert manifest["complete"] is True
     assert manifest["counts"]["planned"] == manifest["counts"]["kept"] == 5
-    definition = make_plan(tiny_config(tiny)).definition
-    # (the code hash is left out: other files may change while a long test session runs)
-    assert {k: v for k, v in manifest["definition"].items() if k != "code_sha256"} == {
-        k: v for k, v in definition.items() if k != "code_sha256"
-    }
-    assert len(manifest["fingerprint"]) == 16
+    assert manifest["fingerprint"] == make_plan(tiny_config(tiny)).fingerprint
+    assert len(manifest["code_sha256"]) == 1  # (other files may change during a long session)
     assert not (tiny / PARTIAL_DIR).exists() or not any((tiny / PARTIAL_DIR).rglob("*.h5"))
     for unit in manifest["units"]:
         h5_path = tiny / unit["file"]
@@ -314,6 +310,8 @@ def test_sigkill_then_resume_equals_two_worker_run(tiny: Path, tmp_path: Path) -
     assert main([*TINY_ARGS, "--out", str(out), "--workers", "1"]) == 0
     ours = json.loads((out / MANIFEST).read_text())
     theirs = json.loads((tiny / MANIFEST).read_text())
+    if ours["code_sha256"] != theirs["code_sha256"]:
+        pytest.skip("the recording code changed between the two collections (shared tree)")
     assert ours == theirs
     assert _frames_and_arrays(out) == _frames_and_arrays(tiny)
     for unit in ours["units"]:
@@ -373,13 +371,19 @@ def test_maniskill_replay_by_actions_reaches_the_recorded_outcome(tiny: Path) ->
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    reason="ManiSkill's replay passes unbatched numpy env states; panda_awda's controller "
-    "set_state expects tensors (robot/controller.py, being reworked by the lead)",
-    strict=False,
-)
 def test_maniskill_replay_by_env_states_reaches_the_recorded_outcome(tiny: Path) -> None:
     out = _replay(tiny / "agent/pick_place/task_00.h5", "--use-env-states")
+    assert "Replayed 2 episodes, 2/2=100.00% demos saved" in out
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    reason="ManiSkill's replay passes unbatched env states; the demonstrator's controller "
+    "set_state indexes them as batched (IndexError in awda_bench/robot/demonstrator.py)",
+    strict=False,
+)
+def test_maniskill_replay_of_the_demonstrator_by_env_states(tiny: Path) -> None:
+    out = _replay(tiny / "demonstrator/pick_place/task_00.h5", "--use-env-states")
     assert "Replayed 2 episodes, 2/2=100.00% demos saved" in out
 
 
@@ -409,7 +413,12 @@ def _fake_episode(job, success: bool):
         env_states={"actors": {"cube": np.zeros((T + 1, 13), np.float32)}},
         attributes={"grasp": np.zeros(T, bool), "press": np.zeros(T, bool)},
         truth={"grasp": np.zeros(T, bool)},
-        meta={"episode_seed": job.seed, "elapsed_steps": T, "success": success},
+        meta={
+            "episode_seed": job.seed,
+            "elapsed_steps": T,
+            "success": success,
+            "code_sha256": "0" * 64,  # "older code" than the tree's
+        },
         env_info={"env_id": "AWDA-PickPlace-v1", "env_kwargs": {}, "max_episode_steps": 300},
     )
 
@@ -481,6 +490,9 @@ def test_errors_are_kept_apart_and_retried_on_rerun(tmp_path: Path) -> None:
     second = run_collect(_fake_config(tmp_path), runner=again)
     assert again.played == [("agent", 1)]  # only the errored attempt is re-recorded
     assert second.complete and second.already == 2 and second.kept == 1
+    # resumed under other code than the first episodes': completed, with a warning
+    assert "partly recorded by other code (code_sha256 000000000000)" in second.warnings[0]
+    assert json.loads((tmp_path / MANIFEST).read_text())["code_sha256"] == ["0" * 64]
 
 
 def test_a_task_the_expert_always_fails_gives_up(tmp_path: Path) -> None:

@@ -141,6 +141,8 @@ def run(args: argparse.Namespace) -> int:
         f"of {result.episode_s:.1f} s episode time), {per_episode / 1e6:.2f} MB/episode; "
         f"{'complete' if result.complete else 'INCOMPLETE'}"
     )
+    for warning in result.warnings:
+        print(f"warning: {warning}", file=sys.stderr)
     if result.errors:
         print(
             f"warning: {result.errors} attempts ended in errors; re-run the same command to "

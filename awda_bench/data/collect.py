@@ -26,12 +26,13 @@ from typing import Any
 from tqdm import tqdm
 
 from awda_bench.data.config import ROLE_SYNTHESIZED, CollectConfig
-from awda_bench.data.plan import CollectJob, CollectPlan, Unit, make_job, make_plan
+from awda_bench.data.plan import CollectJob, CollectPlan, Unit, code_sha256, make_job, make_plan
 from awda_bench.data.pool import InlineRunner, JobResult, JobRunner, ProcessRunner
 from awda_bench.data.trajectory_file import (
     consolidate_unit,
     discard_path,
     load_unit_json,
+    read_shard_meta,
     scan_unit,
     unit_is_complete,
     unit_paths,
@@ -77,6 +78,8 @@ class CollectResult:
     """Bytes of the shards this call kept."""
     complete: bool = False
     """Every unit is finished."""
+    warnings: list[str] = field(default_factory=list)
+    """Things the user should know (e.g. a collection resumed under changed code)."""
 
 
 def _describe(plan: CollectPlan, unit: Unit) -> str:
@@ -104,12 +107,14 @@ def _load_manifest(path: Path) -> dict[str, Any]:
         ) from exc
 
 
-def check_data_dir(root: Path, plan: CollectPlan) -> None:
-    """Refuse a DATA_DIR that is a file, foreign, or holds another collection; nothing written."""
+def check_data_dir(root: Path, plan: CollectPlan) -> list[str]:
+    """Refuse a DATA_DIR that is a file, foreign, or holds another collection; nothing written.
+
+    Returns the code hashes its manifest lists (empty for a new directory)."""
     if root.exists() and not root.is_dir():
         raise UsageError(f"--out {root} is a file, not a directory; choose a directory")
     if not root.is_dir():
-        return
+        return []
     manifest_path = root / MANIFEST
     if manifest_path.is_file():
         manifest = _load_manifest(manifest_path)
@@ -125,14 +130,18 @@ def check_data_dir(root: Path, plan: CollectPlan) -> None:
                 f"this command {plan.fingerprint}; differs in {', '.join(diff)}); repeat its "
                 "original options to resume it, or collect into a new --out"
             )
-    elif any(root.iterdir()):
+        return [str(c) for c in manifest.get("code_sha256", [])]
+    if any(root.iterdir()):
         raise UsageError(
             f"--out {root} is not empty and holds no {MANIFEST}: not a collect directory; "
             "choose an empty or new directory"
         )
+    return []
 
 
-def _manifest(plan: CollectPlan, units: list[dict[str, Any]], complete: bool) -> dict[str, Any]:
+def _manifest(
+    plan: CollectPlan, units: list[dict[str, Any]], complete: bool, code: list[str]
+) -> dict[str, Any]:
     by_role: dict[str, dict[str, int]] = {}
     for u in units:
         entry = by_role.setdefault(u["role"], {"planned": 0, "kept": 0, "discarded": 0})
@@ -143,6 +152,7 @@ def _manifest(plan: CollectPlan, units: list[dict[str, Any]], complete: bool) ->
         "fingerprint": plan.fingerprint,
         "definition": plan.definition,
         "complete": complete,
+        "code_sha256": code,
         "counts": {
             "planned": sum(u["planned"] for u in units),
             "kept": sum(u["kept"] for u in units),
@@ -176,7 +186,7 @@ def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> Colle
     """Record every pending episode of ``config`` into ``config.out`` (see the module docstring)."""
     plan = make_plan(config)
     root = config.out
-    check_data_dir(root, plan)
+    previous_code = check_data_dir(root, plan)
     result = CollectResult(planned=sum(u.planned for u in plan.units))
     states: dict[tuple[str, int], _UnitState] = {}
     jobs: list[CollectJob] = []
@@ -196,7 +206,7 @@ def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> Colle
 
     try:
         root.mkdir(parents=True, exist_ok=True)
-        write_json(root / MANIFEST, _manifest(plan, [], complete=False))
+        write_json(root / MANIFEST, _manifest(plan, [], complete=False, code=previous_code))
     except OSError as exc:
         raise UsageError(
             f"cannot write to --out {root} ({exc.strerror or exc}); fix its permissions or "
@@ -204,6 +214,14 @@ def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> Colle
         ) from exc
     for state in finished:
         _consolidate(root, plan, state)
+
+    current = code_sha256()
+    if previous_code and current not in previous_code and jobs:
+        result.warnings.append(
+            f"{root} was partly recorded by other code (code_sha256 "
+            f"{', '.join(c[:12] for c in previous_code)}); the episodes recorded now use "
+            f"{current[:12]} (the manifest and `dataset info` list every version)"
+        )
 
     bar = tqdm(
         total=result.planned,
@@ -301,6 +319,7 @@ def _read_discard(path: Path) -> dict[str, Any]:
 
 def _write_final_manifest(root: Path, plan: CollectPlan) -> bool:
     units: list[dict[str, Any]] = []
+    code: set[str] = set()
     complete = True
     for unit in plan.units:
         h5_path, json_path = unit_paths(root, unit.name)
@@ -317,6 +336,7 @@ def _write_final_manifest(root: Path, plan: CollectPlan) -> bool:
         }
         if unit_is_complete(root, unit.name, unit.planned):
             payload = load_unit_json(json_path)
+            code |= {str(e["code_sha256"]) for e in payload["episodes"] if "code_sha256" in e}
             entry.update(
                 kept=len(payload["episodes"]),
                 discarded=len(payload.get("discarded", [])),
@@ -326,7 +346,11 @@ def _write_final_manifest(root: Path, plan: CollectPlan) -> bool:
         else:
             complete = False
             kept, discarded = scan_unit(root, unit.name)
+            for shard in kept.values():
+                episode, _ = read_shard_meta(shard)
+                if "code_sha256" in episode:
+                    code.add(str(episode["code_sha256"]))
             entry.update(kept=len(kept), discarded=len(discarded))
         units.append(entry)
-    write_json(root / MANIFEST, _manifest(plan, units, complete))
+    write_json(root / MANIFEST, _manifest(plan, units, complete, sorted(code)))
     return complete

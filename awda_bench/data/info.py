@@ -38,6 +38,8 @@ class DatasetInfo:
     rows: list[UnitRow] = field(default_factory=list)
     disk_bytes: int = 0
     """Every file under DATA_DIR [bytes]."""
+    code_sha256: list[str] = field(default_factory=list)
+    """Hashes of the code that recorded the episodes (more than one: a mixed collection)."""
 
     def totals(self) -> dict[str, dict[str, float]]:
         """Per role: episodes, discarded, steps, bytes per episode."""
@@ -65,6 +67,9 @@ class DatasetInfo:
                 f"{r.role:<13}{r.task:>5} {r.family:<13}{r.episodes:>9}{r.discarded:>10}"
                 f"{f'{r.steps_min}/{r.steps_mean:.0f}/{r.steps_max}':>20}{per:>11.2f}"
             )
+        versions = ", ".join(c[:12] for c in self.code_sha256) or "unknown"
+        mixed = " (WARNING: mixed collection)" if len(self.code_sha256) > 1 else ""
+        lines.append(f"recorded by code {versions}{mixed}")
         for role, t in self.totals().items():
             n = int(t["episodes"])
             per = t["bytes"] / n / 1e6 if n else 0.0
@@ -85,6 +90,7 @@ def dataset_info(data: CollectedData) -> DatasetInfo:
         suite=str(definition.get("suite")),
         split=str(definition.get("split")),
         complete=bool(manifest.get("complete")),
+        code_sha256=[str(c) for c in manifest.get("code_sha256", [])],
     )
     by_unit: dict[tuple[str, int], list[EpisodeRef]] = {}
     for e in data.episodes:

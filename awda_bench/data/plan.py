@@ -47,7 +47,10 @@ CODE_PATHS: tuple[str, ...] = (
     "data/recorder.py",
     "data/trajectory_file.py",
 )
-"""Package paths whose source decides what an episode records (hashed into the fingerprint)."""
+"""Package paths whose source decides what an episode records. Their hash is stamped on every
+episode (``code_sha256``) and listed in the manifest, but is not part of the fingerprint: a
+collection resumed after a code change is completed (with a warning), and a mixed one shows up in
+``dataset info``."""
 
 PACKAGE_DIR = Path(__file__).resolve().parent.parent
 
@@ -193,7 +196,6 @@ def make_plan(config: CollectConfig) -> CollectPlan:
         "horizon_steps": suite.horizon_steps,
         "control_freq_hz": suite.control_freq_hz,
         "awda_bench_version": version,
-        "code_sha256": code_sha256(),
     }
     definition = json.loads(json.dumps(definition))  # as the manifest will read it back
     return CollectPlan(suite=suite, units=tuple(units), definition=definition)

@@ -33,7 +33,7 @@ from awda_bench.data.config import (
     CollectConfig,
     SynthesisConfig,
 )
-from awda_bench.data.plan import CollectJob
+from awda_bench.data.plan import CollectJob, code_sha256
 from awda_bench.suites import Suite, load_suite
 
 ENV_CACHE_SIZE = 4
@@ -118,6 +118,8 @@ class EpisodeRecorder:
     def __init__(self, config: CollectConfig) -> None:
         self.config = config
         self.suite: Suite = load_suite(config.suite, config.suites_dir)
+        self.code_sha256 = code_sha256()
+        """Hash of the recording code in this process (stamped on every episode)."""
         self._envs: OrderedDict[tuple[str, str], tuple[Any, dict[str, Any]]] = OrderedDict()
 
     def env_kwargs(self, uid: str, control_mode: str) -> dict[str, Any]:
@@ -220,6 +222,7 @@ class EpisodeRecorder:
                 "head": 1 if job.role == ROLE_SYNTHESIZED else 0,
                 "max_step_m": base.embodiment.max_step_m,
                 "control_freq_hz": self.suite.control_freq_hz,
+                "code_sha256": self.code_sha256,
                 **extra_meta,
             },
             **data.meta,
