@@ -270,6 +270,10 @@ def test_bad_backend_options_are_one_line_errors(tmp_path: Path, suites: Path, c
     cases = [
         (["--ray-address", "127.0.0.1:6379"], "--ray-address needs --backend ray"),
         (["--backend", "ray", "--workers", "0"], "--backend ray needs --workers >= 1"),
+        (
+            ["--backend", "ray", "--ray-address", "127.0.0.1:1"],
+            "cannot reach the Ray cluster at 127.0.0.1:1",
+        ),
     ]
     for extra, message in cases:
         assert _run(suites, out, "--method", f"{FAKES}:SkillPolicy", *extra) == 2

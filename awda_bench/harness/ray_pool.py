@@ -72,6 +72,16 @@ LOCAL_OBJECT_STORE_BYTES = 128 * 1024**2
 a collected episode: a few MB, passed on at once); Ray's default (30 % of memory) would reserve
 shared memory for nothing."""
 
+REACH_TIMEOUT_S = 10.0
+"""A ``HOST:PORT`` cluster address that accepts no TCP connection within this long is refused at
+once (Ray itself would retry for minutes) [s]."""
+
+AUTH_HINT = (
+    "a cluster with token authentication (on by default in recent Ray) also needs RAY_AUTH_MODE=token "
+    "and its token (RAY_AUTH_TOKEN, or ~/.ray/auth_token from `ray get-auth-token`)"
+)
+"""Printed when joining a cluster fails."""
+
 CLOSE_TIMEOUT_S = 30.0
 """Time actors get to close their envs at the end of a run before they are killed [s]."""
 
@@ -83,6 +93,21 @@ R = TypeVar("R")
 """A result type."""
 _J_in = TypeVar("_J_in", contravariant=True)
 _R_out = TypeVar("_R_out", covariant=True)
+
+
+def check_reachable(address: str) -> None:
+    """Refuse a ``[ray://]HOST:PORT`` address that accepts no TCP connection (``"auto"`` and
+    other forms are left to Ray)."""
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not host or not port.isdigit():
+        return
+    try:
+        socket.create_connection((host.strip("[]"), int(port)), timeout=REACH_TIMEOUT_S).close()
+    except OSError as exc:
+        raise UsageError(
+            f"cannot reach the Ray cluster at {address} ({exc.strerror or exc}); start its head "
+            "with `ray start --head` or fix --ray-address"
+        ) from exc
 
 
 def require_ray() -> ModuleType:
@@ -220,16 +245,15 @@ class RayActorPool(Generic[J, R]):
                     object_store_memory=LOCAL_OBJECT_STORE_BYTES,
                 )
             else:
+                check_reachable(self.address)
                 kwargs.update(address=self.address)
             try:
                 ray.init(**kwargs)
             except (ConnectionError, ValueError, RuntimeError) as exc:
                 where = "a private local instance" if self.address is None else self.address
                 first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
-                raise UsageError(
-                    f"cannot start or join Ray at {where}: {first} "
-                    "(a cluster is started with `ray start --head`)"
-                ) from exc
+                hint = "" if self.address is None else f"; {AUTH_HINT}"
+                raise UsageError(f"cannot start or join Ray at {where}: {first}{hint}") from exc
             self._owns_ray = True
         self._actor_cls = ray.remote(num_cpus=1, max_restarts=0)(PoolActor)
         self.connect_s = time.perf_counter() - t0
