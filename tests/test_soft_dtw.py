@@ -87,3 +87,64 @@ def test_bad_shapes_and_gamma_are_refused() -> None:
         soft_dtw(torch.rand(1, 3, 2), torch.rand(1, 3, 2), 0.0)
     with pytest.raises(UsageError, match="soft-DTW needs"):
         soft_dtw(torch.rand(1, 3, 2), torch.rand(1, 3, 3))
+
+
+# ----------------------------------------------------------------------------- ragged, numpy path
+@pytest.mark.parametrize("gamma", [1.0, 1e-3])
+def test_numpy_path_matches_torch_reference_with_ragged_lengths(gamma: float) -> None:
+    g = torch.Generator().manual_seed(4)
+    x = torch.rand(6, 13, 4, generator=g, dtype=torch.float64, requires_grad=True)
+    y = torch.rand(6, 9, 4, generator=g, dtype=torch.float64, requires_grad=True)
+    lengths = torch.tensor([13, 1, 5, 7, 13, 2])
+    weights = torch.arange(1, 7, dtype=torch.float64)
+    results = []
+    for impl in ("torch", "numpy"):
+        x.grad = y.grad = None
+        values = soft_dtw(x, y, gamma, lengths=lengths, implementation=impl)
+        (values * weights).sum().backward()
+        assert x.grad is not None and y.grad is not None
+        results.append((values.detach(), x.grad.clone(), y.grad.clone()))
+    for ours, reference in zip(*results, strict=True):
+        assert torch.max(torch.abs(ours - reference)) <= 1e-6
+    # each ragged row is the soft-DTW of the truncated sequence, and padding gets no gradient
+    for i, n in enumerate(lengths.tolist()):
+        alone = soft_dtw(x[i : i + 1, :n], y[i : i + 1], gamma, implementation="torch")
+        assert abs(float(alone) - float(results[0][0][i])) <= 1e-9
+        assert torch.all(results[1][1][i, n:] == 0)
+
+
+def test_bad_lengths_and_implementation_are_refused() -> None:
+    x, y = torch.rand(2, 5, 3), torch.rand(2, 4, 3)
+    with pytest.raises(UsageError, match="lengths"):
+        soft_dtw(x, y, lengths=torch.tensor([0, 5]))
+    with pytest.raises(UsageError, match="implementation"):
+        soft_dtw(x, y, implementation="cuda-kernel")
+
+
+@pytest.mark.parametrize("gamma", [1.0, 1e-3])
+def test_multi_waypoint_loss_in_one_call_equals_one_call_per_set(gamma: float) -> None:
+    from awda_bench.models.waypoint_loss import multi_waypoint_sdtw_loss
+
+    g = torch.Generator().manual_seed(5)
+    waypoints = (0.3 * torch.rand(4, 15, 4, generator=g, dtype=torch.float64)).requires_grad_()
+    trajectory = 0.3 * torch.rand(4, 50, 4, generator=g, dtype=torch.float64)
+    trajectory[..., 3] = (trajectory[..., 3] > 0.15).double()
+    out = []
+    for one_call, impl in ((True, "auto"), (False, "auto"), (False, "torch")):
+        waypoints.grad = None
+        loss, per_set = multi_waypoint_sdtw_loss(
+            waypoints,
+            trajectory,
+            num_sets=5,
+            points_per_segment=12,
+            gamma=gamma,
+            attribute_scale=0.2,
+            one_call=one_call,
+            implementation=impl,
+        )
+        loss.backward()
+        assert waypoints.grad is not None
+        out.append((per_set.detach(), waypoints.grad.clone()))
+    for per_set, grad in out[:2]:
+        assert torch.max(torch.abs(per_set - out[2][0])) <= 1e-6
+        assert torch.max(torch.abs(grad - out[2][1])) <= 1e-6

@@ -27,12 +27,20 @@ computed by the backward recursion of Cuturi & Blondel (Algorithm 2), again per 
 Every exponent is :math:`\le 0` (a soft-min never exceeds its arguments), so the backward pass is
 stable too. Gradients with respect to the sequences flow through the cost matrix by ordinary
 autograd (:func:`soft_dtw` builds :math:`\Delta` from the sequences with differentiable torch ops).
+
+Ragged batches (``lengths``): sample ``b`` may use only its first ``n_b <= N`` rows. The forward
+recursion is causal (row ``i`` reads rows ``<= i``), so one table over the padded ``N`` rows holds
+every sample's value at ``R[n_b, M]``; the backward recursion is seeded at ``(n_b + 1, M + 1)`` per
+sample and rows past ``n_b`` get ``E = 0``. This is what lets the multi-waypoint loss evaluate its
+5 polylines of different lengths in one call: 5x fewer anti-diagonal iterations (the Python loop
+is the cost of this implementation, not the arithmetic). A fused CUDA kernel is not provided.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 import torch
 
 from awda_bench.errors import UsageError
@@ -75,72 +83,252 @@ def soft_dtw_forward_table(cost: torch.Tensor, gamma: float) -> torch.Tensor:
     return r
 
 
-def soft_dtw_backward_table(cost: torch.Tensor, r: torch.Tensor, gamma: float) -> torch.Tensor:
-    """``E = dR[N, M] / dcost`` of shape ``(B, N, M)`` from the forward table ``r``."""
+def soft_dtw_backward_table(
+    cost: torch.Tensor, r: torch.Tensor, gamma: float, lengths: torch.Tensor | None = None
+) -> torch.Tensor:
+    """``E = dR[n_b, M] / dcost`` of shape ``(B, N, M)`` from the forward table ``r``.
+
+    ``lengths (B,)``: rows each sample uses (default all ``N``); ``E`` is 0 on the other rows.
+    """
     b, n, m = cost.shape
-    # Padded copies: cost gets a zero border, R gets -inf borders so border terms contribute
-    # exp(-inf) = 0, except the corner (N+1, M+1) which seeds the recursion with E = 1.
+    # Padded copies: cost gets a zero border, R gets -inf borders (and -inf past each sample's
+    # last row) so border terms contribute exp(-inf) = 0, except the corner (n_b + 1, M + 1)
+    # which seeds the recursion with E = 1.
     c = torch.zeros((b, n + 2, m + 2), dtype=cost.dtype, device=cost.device)
     c[:, 1 : n + 1, 1 : m + 1] = cost
     rr = r.clone()
     rr[:, :, m + 1] = -float("inf")
-    rr[:, n + 1, :] = -float("inf")
-    rr[:, n + 1, m + 1] = r[:, n, m]
     e = torch.zeros((b, n + 2, m + 2), dtype=cost.dtype, device=cost.device)
-    e[:, n + 1, m + 1] = 1.0
+    if lengths is None:
+        rr[:, n + 1, :] = -float("inf")
+        rr[:, n + 1, m + 1] = r[:, n, m]
+        e[:, n + 1, m + 1] = 1.0
+        valid = None
+    else:
+        rows = torch.arange(n + 2, device=cost.device)
+        rr[rows.view(1, -1) > lengths.view(-1, 1)] = -float("inf")
+        batch = torch.arange(b, device=cost.device)
+        rr[batch, lengths + 1, m + 1] = r[batch, lengths, m]
+        e[batch, lengths + 1, m + 1] = 1.0
+        valid = rows.view(1, -1) <= lengths.view(-1, 1)  # (B, N + 2)
     for d in range(n + m, 1, -1):
         i, j = _diagonal_indices(n, m, d, cost.device)
         r_ij = rr[:, i, j]
         a = torch.exp((rr[:, i + 1, j] - r_ij - c[:, i + 1, j]) / gamma)
         bb = torch.exp((rr[:, i, j + 1] - r_ij - c[:, i, j + 1]) / gamma)
         cc = torch.exp((rr[:, i + 1, j + 1] - r_ij - c[:, i + 1, j + 1]) / gamma)
-        e[:, i, j] = e[:, i + 1, j] * a + e[:, i, j + 1] * bb + e[:, i + 1, j + 1] * cc
+        value = e[:, i + 1, j] * a + e[:, i, j + 1] * bb + e[:, i + 1, j + 1] * cc
+        if valid is not None:  # rows past n_b: -inf - -inf = NaN there, and E must be 0
+            value = torch.where(valid[:, i], value, torch.zeros_like(value))
+        e[:, i, j] = value
     return e[:, 1 : n + 1, 1 : m + 1]
+
+
+IMPLEMENTATIONS: tuple[str, ...] = ("auto", "torch", "numpy")
+"""``torch``: the anti-diagonal loop in torch ops (any device; the reference); ``numpy``: the
+same recursion on the CPU, in the input's dtype, over a skewed table whose anti-diagonals are
+contiguous slices with the batch innermost (no gathers; numpy's per-op overhead is ~4x below
+torch's and its float32 ``exp`` is vectorized); ``auto``: numpy for CPU tensors, torch otherwise."""
+
+
+def _skew(cost: np.ndarray) -> np.ndarray:
+    """``(B, N, M)`` -> ``(N + M + 3, N + 2, B)``: cell ``(i, j)`` (1-based) at ``[i + j, i]``,
+    zero elsewhere (the zero border of the backward recursion)."""
+    b, n, m = cost.shape
+    out = np.zeros((n + m + 3, n + 2, b), dtype=cost.dtype)
+    i, j = np.meshgrid(np.arange(1, n + 1), np.arange(1, m + 1), indexing="ij")
+    out[i + j, i] = cost.transpose(1, 2, 0)
+    return out
+
+
+def _numpy_forward(cost: np.ndarray, gamma: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, C)`` in skewed layout (:func:`_skew`): ``R[i + j, i, b] = R_{i,j}`` of sample b."""
+    _, n, m = cost.shape
+    c = _skew(cost)
+    r = np.full_like(c, np.inf)
+    r[0, 0] = 0.0
+    inv = cost.dtype.type(1.0 / gamma)
+    g = cost.dtype.type(gamma)
+    for d in range(2, n + m + 1):
+        lo, hi = max(1, d - m), min(n, d - 1)
+        diag = r[d - 1]
+        p0, p1, p2 = r[d - 2, lo - 1 : hi], diag[lo - 1 : hi], diag[lo : hi + 1]
+        low = np.minimum(np.minimum(p0, p1), p2)
+        total = np.exp((low - p0) * inv)
+        total += np.exp((low - p1) * inv)
+        total += np.exp((low - p2) * inv)
+        np.log(total, out=total)
+        r[d, lo : hi + 1] = c[d, lo : hi + 1] + low - g * total
+    return r, c
+
+
+def _numpy_backward(
+    r: np.ndarray, c: np.ndarray, n: int, m: int, gamma: float, lengths: np.ndarray
+) -> np.ndarray:
+    """``E (B, N, M)`` seeded at ``(lengths + 1, M + 1)``; rows past a sample's length get 0."""
+    b = r.shape[2]
+    rows = np.arange(n + 2)
+    batch = np.arange(b)
+    d_idx, i_idx = np.meshgrid(np.arange(r.shape[0]), rows, indexing="ij")
+    past = (i_idx[..., None] > lengths) | ((d_idx - i_idx) == m + 1)[..., None]
+    rr = np.where(past, -np.inf, r).astype(r.dtype)  # rows past n_b, and column M + 1
+    rr[lengths + 1 + m + 1, lengths + 1, batch] = r[lengths + m, lengths, batch]
+    e = np.zeros_like(r)
+    e[lengths + 1 + m + 1, lengths + 1, batch] = 1.0
+    valid = rows[:, None] <= lengths  # (N + 2, B)
+    inv = r.dtype.type(1.0 / gamma)
+    with np.errstate(invalid="ignore", over="ignore"):
+        for d in range(n + m, 1, -1):
+            lo, hi = max(1, d - m), min(n, d - 1)
+            r_ij = rr[d, lo : hi + 1]
+            down, right = slice(lo + 1, hi + 2), slice(lo, hi + 1)  # (i + 1, j), (i, j + 1)
+            value = e[d + 1, down] * np.exp((rr[d + 1, down] - r_ij - c[d + 1, down]) * inv)
+            value += e[d + 1, right] * np.exp((rr[d + 1, right] - r_ij - c[d + 1, right]) * inv)
+            value += e[d + 2, down] * np.exp((rr[d + 2, down] - r_ij - c[d + 2, down]) * inv)
+            e[d, lo : hi + 1] = np.where(valid[lo : hi + 1], value, 0.0)
+    i, j = np.meshgrid(np.arange(1, n + 1), np.arange(1, m + 1), indexing="ij")
+    return np.ascontiguousarray(e[i + j, i].transpose(2, 0, 1))
 
 
 class _SoftDtwFunction(torch.autograd.Function):
     """Soft-DTW of a batch of cost matrices, with the analytic (expected-alignment) gradient."""
 
     @staticmethod
-    def forward(ctx: Any, cost: torch.Tensor, gamma: float) -> torch.Tensor:
+    def forward(
+        ctx: Any, cost: torch.Tensor, gamma: float, lengths: torch.Tensor | None, impl: str
+    ) -> torch.Tensor:
         cost_d = cost.detach()
-        r = soft_dtw_forward_table(cost_d, gamma)
-        ctx.save_for_backward(cost_d, r)
-        ctx.gamma = gamma
-        n, m = cost.shape[1], cost.shape[2]
-        return r[:, n, m].clone()
+        b, n, m = cost.shape
+        ctx.gamma, ctx.impl, ctx.shape = gamma, impl, (n, m)
+        if impl == "numpy":
+            lens = np.full(b, n) if lengths is None else lengths.cpu().numpy()
+            r, c = _numpy_forward(cost_d.cpu().numpy(), gamma)
+            ctx.numpy_tables = (r, c, lens)
+            values = r[lens + m, lens, np.arange(b)]
+            return torch.from_numpy(values).to(dtype=cost.dtype, device=cost.device)
+        r_t = soft_dtw_forward_table(cost_d, gamma)
+        if lengths is None:
+            ctx.save_for_backward(cost_d, r_t)
+            return r_t[:, n, m].clone()
+        ctx.save_for_backward(cost_d, r_t, lengths)
+        return r_t[torch.arange(b, device=cost.device), lengths, m].clone()
 
     @staticmethod
-    def backward(ctx: Any, grad_output: torch.Tensor) -> tuple[torch.Tensor, None]:
-        cost, r = ctx.saved_tensors
-        e = soft_dtw_backward_table(cost, r, ctx.gamma)
-        return grad_output.view(-1, 1, 1) * e, None
+    def backward(ctx: Any, grad_output: torch.Tensor) -> tuple[torch.Tensor, None, None, None]:
+        if ctx.impl == "numpy":
+            r, c, lens = ctx.numpy_tables
+            e_np = _numpy_backward(r, c, *ctx.shape, ctx.gamma, lens)
+            e = torch.from_numpy(e_np).to(dtype=grad_output.dtype, device=grad_output.device)
+        else:
+            cost, r_t, *rest = ctx.saved_tensors
+            e = soft_dtw_backward_table(cost, r_t, ctx.gamma, rest[0] if rest else None)
+        return grad_output.view(-1, 1, 1) * e, None, None, None
 
 
-def soft_dtw_from_cost(cost: torch.Tensor, gamma: float) -> torch.Tensor:
+def _check_lengths(
+    lengths: torch.Tensor | None, b: int, n: int, device: torch.device
+) -> torch.Tensor | None:
+    if lengths is None:
+        return None
+    lengths = torch.as_tensor(lengths, device=device).long()
+    if lengths.shape != (b,) or bool(((lengths < 1) | (lengths > n)).any()):
+        raise UsageError(f"soft-DTW lengths must be ({b},) ints in 1..{n}; got {lengths.tolist()}")
+    return lengths
+
+
+class _SoftDtwSqEuclideanNumpy(torch.autograd.Function):
+    """Soft-DTW between sequences with the squared-Euclidean cost, all in numpy on the CPU.
+
+    The cost and its chain rule are fused in, so no ``(B, N, M, D)`` torch tensor (and no autograd
+    graph for it) exists: with ``E = dR / dcost``,
+    ``dR/dx_i = 2 (x_i sum_j E_ij - sum_j E_ij y_j)`` and ``dR/dy_j = 2 (y_j sum_i E_ij - sum_i
+    E_ij x_i)``.
+    """
+
+    @staticmethod
+    def forward(
+        ctx: Any, x: torch.Tensor, y: torch.Tensor, gamma: float, lengths: torch.Tensor | None
+    ) -> torch.Tensor:
+        xn, yn = x.detach().cpu().numpy(), y.detach().cpu().numpy()
+        b, n, m = xn.shape[0], xn.shape[1], yn.shape[1]
+        # |x|^2 + |y|^2 - 2 x.y (a matmul; clamped: rounding may dip below 0 near identical points)
+        cost = (xn * xn).sum(-1)[:, :, None] + (yn * yn).sum(-1)[:, None, :]
+        cost -= 2.0 * (xn @ yn.transpose(0, 2, 1))
+        np.maximum(cost, 0.0, out=cost)
+        lens = np.full(b, n) if lengths is None else lengths.cpu().numpy()
+        r, c = _numpy_forward(cost, gamma)
+        ctx.tables = (xn, yn, r, c, lens, gamma)
+        return torch.from_numpy(r[lens + m, lens, np.arange(b)].copy()).to(x.device)
+
+    @staticmethod
+    def backward(
+        ctx: Any, grad_output: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor, None, None]:
+        xn, yn, r, c, lens, gamma = ctx.tables
+        n, m = xn.shape[1], yn.shape[1]
+        e = _numpy_backward(r, c, n, m, gamma, lens)
+        e *= grad_output.detach().cpu().numpy().astype(e.dtype)[:, None, None]
+        grad_x = 2.0 * (xn * e.sum(axis=2)[..., None] - e @ yn)
+        grad_y = 2.0 * (yn * e.sum(axis=1)[..., None] - e.transpose(0, 2, 1) @ xn)
+        device = grad_output.device
+        return torch.from_numpy(grad_x).to(device), torch.from_numpy(grad_y).to(device), None, None
+
+
+def soft_dtw_from_cost(
+    cost: torch.Tensor,
+    gamma: float,
+    lengths: torch.Tensor | None = None,
+    implementation: str = "auto",
+) -> torch.Tensor:
     """Soft-DTW values ``(B,)`` of cost matrices ``(B, N, M)``; differentiable in ``cost``.
 
-    Note: the first-order gradient is analytic; a second derivative (double backward) is not
-    provided.
+    ``lengths (B,)`` int: sample ``b`` is the soft-DTW of ``cost[b, :lengths[b]]`` (its other
+    rows are ignored and get zero gradient); default: every row. ``implementation``: one of
+    :data:`IMPLEMENTATIONS` (same values and gradients). Note: the first-order gradient is
+    analytic; a second derivative (double backward) is not provided.
     """
+    if implementation not in IMPLEMENTATIONS:
+        raise UsageError(
+            f"unknown soft-DTW implementation {implementation!r}; choose one of: "
+            f"{', '.join(IMPLEMENTATIONS)}"
+        )
     if cost.dim() != 3:
         raise UsageError(f"soft-DTW needs a (B, N, M) cost tensor, got shape {tuple(cost.shape)}")
     if not gamma > 0:
         raise UsageError(f"soft-DTW gamma must be > 0, got {gamma}")
-    out: torch.Tensor = _SoftDtwFunction.apply(cost, float(gamma))
+    lengths = _check_lengths(lengths, cost.shape[0], cost.shape[1], cost.device)
+    impl = implementation
+    if impl == "auto":
+        impl = "numpy" if cost.device.type == "cpu" else "torch"
+    out: torch.Tensor = _SoftDtwFunction.apply(cost, float(gamma), lengths, impl)
     return out
 
 
-def soft_dtw(x: torch.Tensor, y: torch.Tensor, gamma: float = 1e-3) -> torch.Tensor:
+def soft_dtw(
+    x: torch.Tensor,
+    y: torch.Tensor,
+    gamma: float = 1e-3,
+    lengths: torch.Tensor | None = None,
+    implementation: str = "auto",
+) -> torch.Tensor:
     """Soft-DTW with squared-Euclidean cost between sequences ``x (B, N, D)`` and ``y (B, M, D)``.
 
-    Returns ``(B,)``. Differentiable in both sequences.
+    Returns ``(B,)``. Differentiable in both sequences. ``lengths (B,)``: use only the first
+    ``lengths[b]`` points of ``x[b]`` (ragged batches padded to ``N``).
     """
     if x.dim() != 3 or y.dim() != 3 or x.shape[0] != y.shape[0] or x.shape[2] != y.shape[2]:
         raise UsageError(
             f"soft-DTW needs x (B, N, D) and y (B, M, D); got {tuple(x.shape)} and {tuple(y.shape)}"
         )
-    return soft_dtw_from_cost(squared_euclidean_cost(x, y), gamma)
+    if implementation == "numpy" or (implementation == "auto" and x.device.type == "cpu"):
+        if x.dtype != y.dtype:
+            raise UsageError(f"soft-DTW needs x and y of one dtype, got {x.dtype} and {y.dtype}")
+        if not gamma > 0:
+            raise UsageError(f"soft-DTW gamma must be > 0, got {gamma}")
+        lens = _check_lengths(lengths, x.shape[0], x.shape[1], x.device)
+        out: torch.Tensor = _SoftDtwSqEuclideanNumpy.apply(x, y, float(gamma), lens)
+        return out
+    return soft_dtw_from_cost(squared_euclidean_cost(x, y), gamma, lengths, implementation)
 
 
 def soft_dtw_divergence(x: torch.Tensor, y: torch.Tensor, gamma: float = 1e-3) -> torch.Tensor:

@@ -73,6 +73,8 @@ def multi_waypoint_sdtw_loss(
     points_per_segment: int,
     gamma: float,
     attribute_scale: float,
+    one_call: bool = True,
+    implementation: str = "auto",
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Mean Soft-DTW over the batch and the ``num_sets`` waypoint sets.
 
@@ -81,6 +83,10 @@ def multi_waypoint_sdtw_loss(
         trajectory: ``(B, T, 3 + k)`` ground truth (xyz [m], attribute flags in [0, 1]); its first
             point is the end-effector at the agent's first frame and starts every polyline.
         num_sets, points_per_segment, gamma, attribute_scale: see :class:`AwdaConfig`.
+        one_call: evaluate all sets in one ragged Soft-DTW call (polylines padded to the longest,
+            ``S B`` rows, per-row lengths); ``False`` makes one call per set (the reference the
+            ragged call is tested against; same values and gradients).
+        implementation: Soft-DTW implementation (:data:`~awda_bench.models.soft_dtw.IMPLEMENTATIONS`).
 
     Returns:
         ``(loss, per_set)``: the scalar loss and the batch-mean Soft-DTW of each set ``(S,)``.
@@ -93,10 +99,34 @@ def multi_waypoint_sdtw_loss(
     target = to_cost_space(trajectory, attribute_scale, logits=False)
     predicted = to_cost_space(waypoints, attribute_scale, logits=True)
     start = target[:, 0]
-    per_set = torch.stack(
+    polylines = [
+        interpolate_polyline(start, wp, points_per_segment)
+        for wp in split_waypoint_sets(predicted, num_sets)
+    ]
+    if not one_call:
+        per_set = torch.stack(
+            [
+                soft_dtw(line, target, gamma, implementation=implementation).mean()
+                for line in polylines
+            ]
+        )
+        return per_set.mean(), per_set
+    b = waypoints.shape[0]
+    longest = polylines[-1].shape[1]
+    # Pad each set's polyline by repeating its end point (ignored: lengths cut it off), rows
+    # ordered set-major: row s * B + i is sample i's set s + 1.
+    padded = torch.cat(
         [
-            soft_dtw(interpolate_polyline(start, wp, points_per_segment), target, gamma).mean()
-            for wp in split_waypoint_sets(predicted, num_sets)
-        ]
+            torch.cat((line, line[:, -1:].expand(-1, longest - line.shape[1], -1)), dim=1)
+            for line in polylines
+        ],
+        dim=0,
     )
+    lengths = torch.tensor(
+        [line.shape[1] for line in polylines], device=waypoints.device
+    ).repeat_interleave(b)
+    values = soft_dtw(
+        padded, target.repeat(num_sets, 1, 1), gamma, lengths=lengths, implementation=implementation
+    )
+    per_set = values.view(num_sets, b).mean(dim=1)
     return per_set.mean(), per_set
