@@ -71,7 +71,8 @@ def test_gt_waypoints_plans_restores_the_start_and_succeeds(pick_place_env) -> N
     traj = policy.stats.trajectories[0]
     assert traj.meta["expert_done"] and traj.truth["grasp"].any()
     W = policy.waypoints
-    assert W is not None and W.shape == (5, 4)
+    assert W is not None and W.shape == (5, 5)  # xyz, grasped, pressing
+    assert not W[:, 4].any()  # nothing is pressed in pick-and-place
     assert W[:, 3].tolist() == [0, 1, 1, 1, 0]
 
     steps = 0

@@ -6,8 +6,8 @@ Per episode::
     reset(ctx):  S = env.get_state_dict()                          the real start
                  expert rollout from S, recording a Trajectory     (plan on the scene itself)
                  env.set_state_dict(S)                             back to the real start
-                 g = mine_grasp(trajectory)                        mined, not simulator truth
-                 W = extract_waypoints(tcp path, g, K=5)           (5, 3 + 1)
+                 g = mine_grasp(trajectory), p = mine_press(...)   mined, not simulator truth
+                 W = extract_waypoints(tcp path, [g, p], K=5)      (5, 3 + 2): grasped, pressing
     act(obs):    WaypointExecutor(W).step(state) per env          grasp uses wrist depth only
 
 Rendered frames per episode: wrist depth images during grasps only (one per HOVER step of the
@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from awda_bench.mining import GraspMiningConfig, mine_grasp
+from awda_bench.mining import GraspMiningConfig, PressMiningConfig, mine_grasp, mine_press
 from awda_bench.policies.base import EpisodeContext, EpisodeSpec, Policy
 from awda_bench.primitives.base import RobotState
 from awda_bench.primitives.config import ExecutorConfig, LocalizationConfig
@@ -45,6 +45,8 @@ class GTWaypointsConfig:
     """Primitive and execution parameters."""
     mining: GraspMiningConfig = GraspMiningConfig()
     """Grasp attribute mining."""
+    press_mining: PressMiningConfig = PressMiningConfig()
+    """Pressing attribute mining (the second attribute; the executor's press primitive acts on it)."""
     localization: LocalizationConfig = WRIST_LOCALIZATION
     """Wrist-depth localization in the grasp primitive."""
 
@@ -169,9 +171,14 @@ class GTWaypointsPolicy:
         self.stats.trajectories = trajectories
         self._executors, self._locators, waypoints = [], [], []
         for i, traj in enumerate(trajectories):
-            g = mine_grasp(traj, self.config.mining)
+            attributes = np.column_stack(
+                [mine_grasp(traj, self.config.mining), mine_press(traj, self.config.press_mining)]
+            )
             W = extract_waypoints(
-                traj.tcp_pos, g, self.config.num_waypoints, self.config.executor.grasp.lift_m
+                traj.tcp_pos,
+                attributes,
+                self.config.num_waypoints,
+                self.config.executor.grasp.lift_m,
             )
             locator = WristLocator(ctx.env, env_index=i, config=self.config.localization)
             self._locators.append(locator)

@@ -162,6 +162,54 @@ class GraspConfig:
 
 
 @dataclass(frozen=True)
+class PressConfig:
+    """The press primitive (:mod:`awda_bench.primitives.press`): approach, contact, hold, retract."""
+
+    max_step_m: float = 0.02
+    """Displacement of a unit action component in one control step [m] (the controller's)."""
+    slow_distance_m: float = 0.04
+    """Within this distance before the waypoint (along the approach) the primitive slows down [m]
+    (the press-button expert's pressed waypoint lies a button travel, 2 cm, below the cap)."""
+    press_speed: float = 0.25
+    """Approach speed near the waypoint and push while holding, as a fraction of a full step
+    (5 mm/step: a gentle, bounded push)."""
+    overshoot_m: float = 0.03
+    """The approach continues at most this far past the waypoint before giving up [m]."""
+    end_tolerance_m: float = 0.002
+    """The approach has reached its end within this [m]."""
+    min_command_m: float = 0.004
+    """Blocked: the command asked for at least this much motion [m] (as the pressing miner) ..."""
+    progress_ratio: float = 0.15
+    """... and the TCP advanced less than this fraction of it (as the pressing miner)."""
+    contact_steps: int = 2
+    """Consecutive blocked steps that mean contact."""
+    hold_steps: int = 20
+    """Control steps the press is held after contact (1 s at 20 Hz; a button counts as pressed
+    the moment it reaches its depth, the hold makes the pressing visible in the trajectory)."""
+    retract_m: float = 0.08
+    """RETRACT moves back along the approach direction this far [m]."""
+    retract_tol_m: float = 0.01
+    """RETRACT is done within this of its goal [m]."""
+    step_budget: int = 60
+    """Most control steps of the approach and of the retract."""
+
+    def __post_init__(self) -> None:
+        _require_positive(
+            self,
+            "max_step_m",
+            "slow_distance_m",
+            "press_speed",
+            "min_command_m",
+            "progress_ratio",
+            "contact_steps",
+            "hold_steps",
+            "retract_tol_m",
+            "step_budget",
+        )
+        _require_non_negative(self, "overshoot_m", "end_tolerance_m", "retract_m")
+
+
+@dataclass(frozen=True)
 class ExecutorConfig:
     """Reference semantics of attributed-waypoint execution (SPEC §4)."""
 
@@ -173,6 +221,8 @@ class ExecutorConfig:
     """The grasp primitive run at the first grasp-attributed waypoint."""
     drop: DropConfig = DropConfig()
     """The drop run at the first free waypoint after carrying."""
+    press: PressConfig = PressConfig()
+    """The press run at a press-attributed waypoint (attribute 1), when present."""
     max_grasps: int = 1
     """Grasp attempts per episode (reference: one)."""
 

@@ -1,15 +1,21 @@
 """Execute attributed waypoints with the motor primitives (reference semantics, SPEC §4).
 
 Input: waypoints ``W`` of shape ``(N, 3 + k)``, ``k >= 1``: world position [m] plus attribute flags,
-the first attribute being "object grasped" (> 0.5 = set). Waypoint ``i`` is handled, in order, by::
+the first attribute being "object grasped", the second (when ``k >= 2``) "pressing" (> 0.5 = set).
+Waypoint ``i`` is handled, in order, by::
 
-    grasp flag | holding | action
-    -----------+---------+---------------------------------------------------------------
-    set        | no      | GRASP primitive (localize, hover, descend, close, lift), if the
-               |         | episode's grasp budget (one) is left; else FREE-SPACE to W[i]
-    set        | yes     | CARRY to W[i]
-    clear      | yes     | DROP in place, then FREE-SPACE to W[i]
-    clear      | no      | FREE-SPACE to W[i]
+    grasp flag | press flag | holding | action
+    -----------+------------+---------+-------------------------------------------------------
+    set        |            | no      | GRASP primitive (localize, hover, descend, close, lift),
+               |            |         | if the episode's grasp budget (one) is left; else
+               |            |         | FREE-SPACE to W[i]
+    set        |            | yes     | CARRY to W[i]
+    clear      | set        | no      | PRESS primitive toward W[i] (approach until blocked,
+               |            |         | hold, retract); a press-attributed waypoint right after
+               |            |         | a press belongs to the same press (the end of its hold)
+               |            |         | and is skipped
+    clear      |            | yes     | DROP in place, then FREE-SPACE to W[i]
+    clear      | clear      | no      | FREE-SPACE to W[i]
 
 Before execution, the waypoint preceding the first grasp-attributed waypoint is raised by
 ``pregrasp_raise_m`` (15 cm), so the approach ends above the object, where the wrist camera sees it.
@@ -34,6 +40,7 @@ from awda_bench.primitives.config import ExecutorConfig
 from awda_bench.primitives.drop import Drop
 from awda_bench.primitives.free_space import FreeSpace
 from awda_bench.primitives.grasp import Grasp, Locator
+from awda_bench.primitives.press import Press
 
 
 @dataclass
@@ -42,7 +49,7 @@ class WaypointLog:
 
     index: int
     kind: str
-    """``"move"``, ``"carry"``, ``"grasp"`` or ``"drop+move"``."""
+    """``"move"``, ``"carry"``, ``"grasp"``, ``"drop+move"``, ``"press"`` or ``"press (held)"``."""
     steps: int = 0
     """Control steps spent on this waypoint."""
     reached: bool | None = None
@@ -86,6 +93,7 @@ class WaypointExecutor:
         self.current: Primitive | None = None
         self.done = False
         self.grasp_primitives: list[Grasp] = []
+        self.press_primitives: list[Press] = []
         self._gen = self._run()
         next(self._gen)  # advance to the first ``yield`` (waits for a state)
 
@@ -101,6 +109,8 @@ class WaypointExecutor:
             return "carry"
         if isinstance(self.current, Drop):
             return "drop"
+        if isinstance(self.current, Press):
+            return f"press:{self.current.phase.value}"
         return "move"
 
     def step(self, state: RobotState) -> np.ndarray:
@@ -124,9 +134,24 @@ class WaypointExecutor:
     def _run(self) -> Generator[np.ndarray, RobotState, None]:
         c = self.config
         state: RobotState = yield hold_action(GRIP_OPEN)  # primed by __init__; value discarded
+        pressed_last = False
         for i, wp in enumerate(self.waypoints):
             target = wp[:3]
             grasp_flag = bool(wp[3] > 0.5)
+            press_flag = len(wp) > 4 and bool(wp[4] > 0.5)
+            if press_flag and not grasp_flag and not self.holding:
+                if pressed_last:
+                    self.log.append(WaypointLog(i, "press (held)"))
+                    continue
+                entry = WaypointLog(i, "press")
+                self.log.append(entry)
+                press = Press(target, c.press)
+                self.press_primitives.append(press)
+                state = yield from self._run_primitive(press, entry, state)
+                entry.reached = not press.failed
+                pressed_last = True
+                continue
+            pressed_last = False
             if grasp_flag and not self.holding and self.grasps < c.max_grasps:
                 entry = WaypointLog(i, "grasp")
                 self.log.append(entry)
