@@ -377,11 +377,6 @@ def test_maniskill_replay_by_env_states_reaches_the_recorded_outcome(tiny: Path)
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    reason="ManiSkill's replay passes unbatched env states; the demonstrator's controller "
-    "set_state indexes them as batched (IndexError in awda_bench/robot/demonstrator.py)",
-    strict=False,
-)
 def test_maniskill_replay_of_the_demonstrator_by_env_states(tiny: Path) -> None:
     out = _replay(tiny / "demonstrator/pick_place/task_00.h5", "--use-env-states")
     assert "Replayed 2 episodes, 2/2=100.00% demos saved" in out

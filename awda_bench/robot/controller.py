@@ -253,7 +253,8 @@ class BinaryGripperController(PDJointPosMimicController):
     def set_state(self, state: dict) -> None:
         if state and "closed" in state:
             # tensors from get_state_dict, or arrays from a trajectory file's env_states
-            self._apply(common.to_tensor(state["closed"], device=self.device).bool())
+            closed = common.to_tensor(state["closed"], device=self.device).bool()
+            self._apply(closed.reshape(self.scene.num_envs, 1))
 
     def set_action(self, action: torch.Tensor) -> None:
         closed = action[:, :1] > 0

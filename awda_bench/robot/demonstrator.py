@@ -96,7 +96,9 @@ class FloatingDeltaPosController(PDJointPosController):
         if not state:
             return
         # tensors from get_state_dict, or arrays from a trajectory file's env_states
-        self._target_qpos = common.to_tensor(state["target_qpos"], device=self.device).clone()
+        # (unbatched when a replay hands over one step of a single env's trajectory)
+        target = common.to_tensor(state["target_qpos"], device=self.device).clone()
+        self._target_qpos = target.reshape(self.scene.num_envs, -1).to(torch.float32)
         self.set_drive_targets(self._target_qpos)
 
 
