@@ -71,12 +71,27 @@ def test_carry_holds_the_gripper_closed() -> None:
     assert actions and all(a[3] > 0 for a in actions)
 
 
-def test_drop_opens_in_place_for_open_steps() -> None:
+def test_drop_settles_then_opens_in_place_for_open_steps() -> None:
+    # the kinematic robot stops at once: one closed step to see it settled, then open_steps open
     robot = KinematicRobot(tcp_pos=np.array([0.0, 0.0, 0.3]), gripper_opening_m=0.0)
     actions = _run(Drop(DropConfig(open_steps=4)), robot)
-    assert len(actions) == 4
-    assert all(np.allclose(a, [0, 0, 0, -1]) for a in actions)
+    assert len(actions) == 5
+    assert np.allclose(actions[0], [0, 0, 0, 1])
+    assert all(np.allclose(a, [0, 0, 0, -1]) for a in actions[1:])
     assert robot.gripper_opening_m == pytest.approx(0.04)
+
+
+def test_drop_waits_for_a_moving_tcp_at_most_settle_steps() -> None:
+    from awda_bench.primitives.base import RobotState
+
+    drop = Drop(DropConfig(open_steps=2, settle_steps=3))
+    grips = []
+    for z in (0.30, 0.28, 0.26, 0.24, 0.22, 0.20, 0.18):  # still moving 2 cm per step
+        action = drop.step(RobotState(tcp_pos=np.array([0.0, 0.0, z]), gripper_opening_m=0.03))
+        if action is None:
+            break
+        grips.append(action[3])
+    assert grips == [1.0, 1.0, 1.0, -1.0, -1.0]
 
 
 @pytest.mark.parametrize("offset_xy", [(0.0, 0.0), (0.06, -0.04)])

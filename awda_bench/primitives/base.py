@@ -42,3 +42,19 @@ class Primitive(Protocol):
 def hold_action(grip: float) -> np.ndarray:
     """Zero motion with the given gripper command, shape ``(4,)``."""
     return np.array([0.0, 0.0, 0.0, grip], dtype=np.float64)
+
+
+def is_blocked(
+    previous_tcp: np.ndarray,
+    tcp: np.ndarray,
+    commanded_m: np.ndarray,
+    min_command_m: float,
+    progress_ratio: float,
+) -> bool:
+    """The pressing condition of :mod:`awda_bench.mining` for one step: the command asked for at
+    least ``min_command_m`` [m] and the TCP advanced less than ``progress_ratio`` of it along it."""
+    norm = float(np.linalg.norm(commanded_m))
+    if norm < min_command_m:
+        return False
+    progress = float((np.asarray(tcp) - np.asarray(previous_tcp)) @ commanded_m) / norm
+    return progress < progress_ratio * norm

@@ -56,9 +56,16 @@ class DropConfig:
     open_steps: int = 6
     """Control steps the open command is held with zero motion (0.3 s at 20 Hz; the Panda fingers
     open from a 3.5 cm grip to fully open in about that time, measured on ``panda_awda``)."""
+    settle_steps: int = 4
+    """Before opening, up to this many zero-motion steps with the grip closed until the TCP has
+    settled: a carry ends within 2 cm of its waypoint while the arm still moves at up to 2 cm per
+    step, and an object released in motion lands off target (stack block 0.5 without it)."""
+    settled_m: float = 0.002
+    """The TCP has settled when it moved less than this in one step [m]."""
 
     def __post_init__(self) -> None:
-        _require_positive(self, "open_steps")
+        _require_positive(self, "open_steps", "settled_m")
+        _require_non_negative(self, "settle_steps")
 
 
 @dataclass(frozen=True)
@@ -144,6 +151,20 @@ class GraspConfig:
     """Step 5 ends within this distance [m] of the lift target."""
     lift_step_budget: int = 20
     """Control steps allowed for step 5."""
+    lift_probe_m: float = 0.02
+    """Step 5 starts gently: the first this-many metres at ``lift_probe_speed`` [m] ..."""
+    lift_probe_speed: float = 0.25
+    """... as a fraction of a full step; if the lift is blocked there (the pressing condition,
+    ``lift_blocked_steps`` steps in a row) the grasped thing is fixed or articulated (a door or
+    drawer handle) and the lift ends instead of tearing the handle out of the fingers. Measured:
+    with the tracking controller a full-speed lift pulled every door handle free (door open 0/10
+    with gt-waypoints); the reference's compliant arm just stalled."""
+    lift_blocked_steps: int = 2
+    """Consecutive blocked steps that end the lift."""
+    lift_min_command_m: float = 0.004
+    """Blocked: the lift command asked for at least this much motion [m] ..."""
+    lift_progress_ratio: float = 0.15
+    """... and the TCP rose less than this fraction of it (as the pressing miner)."""
 
     def __post_init__(self) -> None:
         _require_positive(
@@ -157,6 +178,10 @@ class GraspConfig:
             "lift_m",
             "lift_tol_m",
             "lift_step_budget",
+            "lift_probe_speed",
+            "lift_blocked_steps",
+            "lift_min_command_m",
+            "lift_progress_ratio",
         )
         _require_non_negative(self, "descent_offset_m", "min_floor_clearance_m")
 

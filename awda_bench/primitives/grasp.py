@@ -5,7 +5,8 @@ Timeline in control steps (each phase ends on its tolerance or its step budget):
     HOVER    re-localize every step; move to  top + (0, 0, hover_height_m)        gripper open
     DESCEND  move to (x, y, max(z_top - descent_offset_m, z_floor + clearance))  gripper open
     CLOSE    hold position, close command, close_steps steps
-    LIFT     move to p_close + (0, 0, lift_m)                                     gripper closed
+    LIFT     move to p_close + (0, 0, lift_m), the first lift_probe_m slowly;     gripper closed
+             blocked there (fixed or articulated object) -> the lift ends early
     DONE
 
 ``z_top`` is the localized (visible top) z of the object. The localizer is injected as a callable
@@ -22,7 +23,7 @@ from enum import Enum
 
 import numpy as np
 
-from awda_bench.primitives.base import GRIP_CLOSE, GRIP_OPEN, RobotState, hold_action
+from awda_bench.primitives.base import GRIP_CLOSE, GRIP_OPEN, RobotState, hold_action, is_blocked
 from awda_bench.primitives.config import GraspConfig
 from awda_bench.primitives.free_space import straight_line_action
 from awda_bench.primitives.localization import Localization
@@ -78,6 +79,11 @@ class Grasp:
         self.hover_reached = False
         self._descent_target: np.ndarray | None = None
         self._lift_target: np.ndarray | None = None
+        self._lift_last: tuple[np.ndarray, np.ndarray] | None = None
+        """(TCP, commanded displacement [m]) of the last lift step."""
+        self._lift_blocked_steps = 0
+        self.lift_blocked = False
+        """True when the lift ended because the grasped thing did not rise (fixed/articulated)."""
 
     # -- helpers -------------------------------------------------------------------------------
     def _relocalize(self) -> None:
@@ -149,11 +155,31 @@ class Grasp:
                 return hold_action(GRIP_CLOSE)
             if self.phase is GraspPhase.LIFT:
                 assert self._lift_target is not None
+                tcp = np.asarray(state.tcp_pos, dtype=np.float64)
+                if self._lift_last is not None and is_blocked(
+                    self._lift_last[0],
+                    tcp,
+                    self._lift_last[1],
+                    c.lift_min_command_m,
+                    c.lift_progress_ratio,
+                ):
+                    self._lift_blocked_steps += 1
+                else:
+                    self._lift_blocked_steps = 0
+                if self._lift_blocked_steps >= c.lift_blocked_steps:
+                    self.lift_blocked = True
+                    self.phase = GraspPhase.DONE
+                    continue
                 if (
-                    np.linalg.norm(self._lift_target - state.tcp_pos) < c.lift_tol_m
+                    np.linalg.norm(self._lift_target - tcp) < c.lift_tol_m
                     or self.phase_steps[GraspPhase.LIFT] >= c.lift_step_budget
                 ):
                     self.phase = GraspPhase.DONE
                     continue
-                return self._move(state, self._lift_target, GRIP_CLOSE)
+                lifted = tcp[2] - (self._lift_target[2] - c.lift_m)
+                action = self._move(state, self._lift_target, GRIP_CLOSE)
+                if lifted < c.lift_probe_m:
+                    action[:3] *= min(1.0, c.lift_probe_speed / max(np.abs(action[:3]).max(), 1e-9))
+                self._lift_last = (tcp, action[:3] * self.max_step_m)
+                return action
             return None

@@ -21,7 +21,7 @@ from enum import Enum
 
 import numpy as np
 
-from awda_bench.primitives.base import GRIP_CLOSE, RobotState
+from awda_bench.primitives.base import GRIP_CLOSE, RobotState, is_blocked
 from awda_bench.primitives.config import PressConfig
 
 
@@ -81,15 +81,12 @@ class Press:
         return np.array([a[0], a[1], a[2], GRIP_CLOSE], dtype=np.float64)
 
     def _was_blocked(self, tcp: np.ndarray) -> bool:
-        cfg = self.config
         if self._last_pos is None:
             return False
-        command = self._last_command
-        norm = float(np.linalg.norm(command))
-        if norm < cfg.min_command_m:
-            return False
-        progress = float((tcp - self._last_pos) @ command) / norm
-        return progress < cfg.progress_ratio * norm
+        cfg = self.config
+        return is_blocked(
+            self._last_pos, tcp, self._last_command, cfg.min_command_m, cfg.progress_ratio
+        )
 
     def step(self, state: RobotState) -> np.ndarray | None:
         cfg = self.config
