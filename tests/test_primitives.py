@@ -94,6 +94,27 @@ def test_drop_waits_for_a_moving_tcp_at_most_settle_steps() -> None:
     assert grips == [1.0, 1.0, 1.0, -1.0, -1.0]
 
 
+def test_grasp_lift_ends_when_the_grasped_thing_does_not_rise() -> None:
+    """A handle on a hinge: the TCP cannot rise more than 3 mm after the close; the lift probes
+    slowly and stops after ``lift_blocked_steps`` blocked steps instead of pulling on."""
+    box = Box(center_xy=np.array([0.4, 0.1]), size=np.array([0.04, 0.04, 0.12]))
+    robot = KinematicRobot(tcp_pos=np.array([0.4, 0.1, 0.35]), boxes=[box])
+    cfg = GraspConfig()
+    grasp = Grasp(_locator(robot), cfg)
+    state, ceiling, lift_actions = robot.state, None, []
+    while (a := grasp.step(state)) is not None:
+        if grasp.phase is GraspPhase.LIFT:
+            ceiling = state.tcp_pos[2] + 0.003 if ceiling is None else ceiling
+            lift_actions.append(a)
+        state = robot.step(a)
+        if ceiling is not None:
+            robot.tcp_pos[2] = min(robot.tcp_pos[2], ceiling)
+            state = robot.state
+    assert grasp.lift_blocked and not grasp.failed
+    assert len(lift_actions) <= cfg.lift_blocked_steps + 1
+    assert all(np.abs(a[:3]).max() <= cfg.lift_probe_speed + 1e-9 for a in lift_actions)
+
+
 @pytest.mark.parametrize("offset_xy", [(0.0, 0.0), (0.06, -0.04)])
 def test_grasp_localizes_hovers_descends_closes_and_lifts(offset_xy) -> None:
     box = Box(center_xy=np.array([0.4, 0.1]), size=np.array([0.04, 0.04, 0.12]))
