@@ -12,6 +12,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -147,6 +148,22 @@ def test_an_actor_killed_by_pid_mid_sweep_loses_no_episode_and_repeats_none(
     assert _keys(records) == sorted((j.spec.task, j.spec.episode) for j in jobs)  # once each
     assert {r.status for r in records} == {STATUS_OK}
     assert (pool.requeued, pool.respawns) == (1, 1)
+
+
+def test_an_actor_lost_while_starting_is_replaced_when_others_work(
+    tmp_path: Path, suites: Path, monkeypatch
+) -> None:
+    monkeypatch.setenv("AWDA_FAKE_MARKERS", str(tmp_path))  # before Ray starts: actors inherit it
+    monkeypatch.setenv("AWDA_FAKE_SLEEP_S", "0.3")  # ~2 s per episode: outlasts the 3 s wait
+    jobs, config = _jobs(suites, "SlowPolicy", episodes=3)
+    config = replace(config, env_factory="ray_fakes:make_env_second_dies_once")
+    records: list[EpisodeRecord] = []
+    with RayWorkerPool(config, 2, load_suite("fake", suites)) as pool:
+        pool.run(jobs, records.append)
+    assert (tmp_path / "died").exists()
+    assert _keys(records) == sorted((j.spec.task, j.spec.episode) for j in jobs)
+    assert {r.status for r in records} == {STATUS_OK}
+    assert (pool.respawns, pool.requeued) == (1, 0)
 
 
 def test_an_episode_that_kills_its_worker_every_time_ends_as_one_error(suites: Path) -> None:

@@ -371,9 +371,16 @@ class RayActorPool(Generic[J, R]):
             return self._respawn(slot)
         except exceptions.RayError as exc:  # the actor's process or node is gone
             if slot.job is None:
-                raise WorkerStartError(
-                    f"a Ray actor died before building its env ({type(exc).__name__})"
-                ) from exc
+                if not any(s.ready for s in self._slots):  # nothing works: stop the run
+                    raise WorkerStartError(
+                        f"a Ray actor died before building its env ({type(exc).__name__})"
+                    ) from exc
+                print(  # others built theirs: a lost node, not a broken set-up
+                    f"warning: a Ray actor died while starting ({type(exc).__name__}); "
+                    "starting another",
+                    file=sys.stderr,
+                )
+                return self._respawn(slot)
             losses[id(slot.job)] += 1
             lost = losses[id(slot.job)]
             if lost > LOST_WORKER_RETRIES:
