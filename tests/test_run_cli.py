@@ -215,3 +215,44 @@ def test_sigkill_mid_sweep_then_resume_equals_an_uninterrupted_run(
         tmp_path / "rep-whole" / "s3.md"
     ).read_text()
     assert "⚠ WARNINGS" not in (tmp_path / "rep-killed" / "report.md").read_text()
+
+
+def test_num_waypoints_selects_the_gt_waypoints_variant(tmp_path: Path, capsys) -> None:
+    import argparse
+
+    from awda_bench.commands.run import add_parser, config_from_args
+    from awda_bench.harness.methods import get_method, make_policy, resolve  # noqa: F401
+    from awda_bench.policies.gt_waypoints import gt_waypoints_k3, gt_waypoints_k8
+
+    parser = argparse.ArgumentParser()
+    sub = parser.add_subparsers()
+    add_parser(sub)
+
+    def method(*extra: str) -> str:
+        args = parser.parse_args(["run", "--suite", "mosaic", "--out", str(tmp_path), *extra])
+        return config_from_args(args).method
+
+    assert method() == "gt-waypoints"
+    assert method("--num-waypoints", "5") == "gt-waypoints"
+    assert method("--num-waypoints", "3") == "gt-waypoints-k3"
+    assert method("--num-waypoints", "8") == "gt-waypoints-k8"
+    assert get_method("gt-waypoints-k8").target.endswith(":gt_waypoints_k8")
+    assert gt_waypoints_k3().config.num_waypoints == 3
+    assert gt_waypoints_k8().config.num_waypoints == 8
+    # only for gt-waypoints: one line, exit 2, nothing written
+    code = main(
+        [
+            "run",
+            "--suite",
+            "mosaic",
+            "--method",
+            "scripted",
+            "--num-waypoints",
+            "3",
+            "--out",
+            str(tmp_path / "runs"),
+        ]
+    )
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "--num-waypoints" in err
+    assert not (tmp_path / "runs").exists()

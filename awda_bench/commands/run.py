@@ -7,6 +7,7 @@ import os
 import sys
 from pathlib import Path
 
+from awda_bench.errors import UsageError
 from awda_bench.harness.backends import BACKENDS
 from awda_bench.harness.methods import DEFAULT_METHOD, method_names
 from awda_bench.harness.results_store import STORE_NAME
@@ -40,6 +41,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--method",
         default=DEFAULT_METHOD,
         help=f"method ({', '.join(method_names())}); default {DEFAULT_METHOD}",
+    )
+    parser.add_argument(
+        "--num-waypoints",
+        type=int,
+        choices=(3, 5, 8),
+        help="gt-waypoints only: K waypoints per episode (default 5, the paper's); K = 3 and 8 "
+        "are their own methods and table columns, gt-waypoints-k3 and gt-waypoints-k8",
     )
     parser.add_argument("--checkpoints", type=Path, help="snapshot directory of a learned method")
     parser.add_argument(
@@ -105,11 +113,25 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return parser
 
 
+def _method(args: argparse.Namespace) -> str:
+    """``--method`` with ``--num-waypoints`` folded in (gt-waypoints' K variants are methods)."""
+    if args.num_waypoints is None:
+        return str(args.method)
+    if args.method != "gt-waypoints":
+        raise UsageError(
+            f"--num-waypoints applies to --method gt-waypoints, not {args.method!r}; "
+            "drop --num-waypoints or use --method gt-waypoints"
+        )
+    from awda_bench.policies.gt_waypoints import gt_waypoints_method_name
+
+    return gt_waypoints_method_name(args.num_waypoints)
+
+
 def config_from_args(args: argparse.Namespace) -> SweepConfig:
     episodes = args.episodes if args.episodes is not None or not args.quick else QUICK_EPISODES
     return SweepConfig(
         suite=args.suite,
-        method=args.method,
+        method=_method(args),
         out=args.out,
         checkpoints=args.checkpoints,
         snapshots=1 if args.quick else args.snapshots,

@@ -163,6 +163,16 @@ for _spec in (
         description="privileged: ground-truth attributed waypoints executed by the primitives",
     ),
     MethodSpec(
+        "gt-waypoints-k3",
+        "awda_bench.policies.gt_waypoints:gt_waypoints_k3",
+        description="gt-waypoints with K = 3 waypoints (--num-waypoints 3)",
+    ),
+    MethodSpec(
+        "gt-waypoints-k8",
+        "awda_bench.policies.gt_waypoints:gt_waypoints_k8",
+        description="gt-waypoints with K = 8 waypoints (--num-waypoints 8)",
+    ),
+    MethodSpec(
         "scripted",
         "awda_bench.policies.scripted:ScriptedPolicy",
         description="privileged: scripted expert",

@@ -220,3 +220,27 @@ class GTWaypointsPolicy:
 def episode_spec_for(suite: str, task: int, seed: int) -> EpisodeSpec:
     """A spec for ad-hoc runs (benchmarks, tests) outside the harness."""
     return EpisodeSpec(suite=suite, task=task, episode=0, seed=seed, demo_seed=seed + 1)
+
+
+WAYPOINT_COUNTS = (3, 5, 8)
+"""K values offered as methods: ``gt-waypoints`` (K = 5, the paper's) and ``gt-waypoints-k3``,
+``gt-waypoints-k8`` (``run --method gt-waypoints --num-waypoints K``): how many are enough."""
+
+
+def gt_waypoints_method_name(num_waypoints: int) -> str:
+    """The method (and table column) name of gt-waypoints with K waypoints."""
+    return "gt-waypoints" if num_waypoints == 5 else f"gt-waypoints-k{num_waypoints}"
+
+
+def gt_waypoints_k3() -> GTWaypointsPolicy:
+    """``gt-waypoints`` with K = 3."""
+    policy = GTWaypointsPolicy(GTWaypointsConfig(num_waypoints=3))
+    policy.name = gt_waypoints_method_name(3)
+    return policy
+
+
+def gt_waypoints_k8() -> GTWaypointsPolicy:
+    """``gt-waypoints`` with K = 8."""
+    policy = GTWaypointsPolicy(GTWaypointsConfig(num_waypoints=8))
+    policy.name = gt_waypoints_method_name(8)
+    return policy
