@@ -221,7 +221,7 @@ def test_num_waypoints_selects_the_gt_waypoints_variant(tmp_path: Path, capsys) 
     import argparse
 
     from awda_bench.commands.run import add_parser, config_from_args
-    from awda_bench.harness.methods import get_method, make_policy, resolve  # noqa: F401
+    from awda_bench.harness.methods import get_method
     from awda_bench.policies.gt_waypoints import gt_waypoints_k3, gt_waypoints_k8
 
     parser = argparse.ArgumentParser()
