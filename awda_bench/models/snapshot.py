@@ -11,6 +11,8 @@ file never runs pickled code)::
     step             optimizer steps taken when the file was written
     rng_state        {"torch", "cuda", "numpy", "python"}: generator states to resume bit-exactly
     train_config     the TrainConfig as a dict, or None
+    training         optional: what the run trained on and how (``train`` command: method,
+                     ablation, Table S3 column, recipe, dataset fingerprint, hold-out), or absent
 
 The evaluation harness identifies a snapshot by the SHA-256 of the file's bytes
 (:attr:`Snapshot.sha256`), lists a run's snapshots with :func:`list_snapshots` and loads one with
@@ -143,6 +145,8 @@ class Snapshot:
     """Generator states (:func:`restore_rng_state`)."""
     train_config: dict[str, Any] | None
     """The training config as a dict, if saved."""
+    training: dict[str, Any] | None = None
+    """What the run trained on and how (the ``train`` command's record), if saved."""
 
     def build_model(self, device: torch.device | str = "cpu") -> nn.Module:
         """A model of this architecture with the snapshot's weights, in eval mode, on ``device``.
@@ -161,8 +165,11 @@ def save_snapshot(
     step: int,
     optimizer: torch.optim.Optimizer | None = None,
     train_config: object | None = None,
+    training: dict[str, Any] | None = None,
 ) -> Path:
-    """Write ``model`` (+ optimizer, step, RNG states) to ``path`` atomically (temp + rename)."""
+    """Write ``model`` (+ optimizer, step, RNG states) to ``path`` atomically (temp + rename).
+
+    ``training``: plain-data record of the run (str/int/float/bool/None, lists, dicts)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = {
@@ -175,6 +182,8 @@ def save_snapshot(
         "rng_state": capture_rng_state(),
         "train_config": config_to_dict(train_config) if train_config is not None else None,
     }
+    if training is not None:
+        payload["training"] = training
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     torch.save(payload, tmp)
     os.replace(tmp, path)
@@ -224,6 +233,7 @@ def load_snapshot(path: Path | str) -> Snapshot:
         step=int(raw["step"]),
         rng_state=raw["rng_state"],
         train_config=raw.get("train_config"),
+        training=raw.get("training"),
     )
 
 

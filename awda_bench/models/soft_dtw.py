@@ -217,7 +217,8 @@ class _SoftDtwFunction(torch.autograd.Function):
     def backward(ctx: Any, grad_output: torch.Tensor) -> tuple[torch.Tensor, None, None, None]:
         if ctx.impl == "numpy":
             r, c, lens = ctx.numpy_tables
-            e_np = _numpy_backward(r, c, *ctx.shape, ctx.gamma, lens)
+            n, m = ctx.shape
+            e_np = _numpy_backward(r, c, n, m, ctx.gamma, lens)
             e = torch.from_numpy(e_np).to(dtype=grad_output.dtype, device=grad_output.device)
         else:
             cost, r_t, *rest = ctx.saved_tensors

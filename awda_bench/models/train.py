@@ -16,10 +16,11 @@ exact loss curve of an uninterrupted run on the same device::
 from __future__ import annotations
 
 import random
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 import torch
@@ -92,6 +93,12 @@ def _seed_everything(seed: int) -> None:
     random.seed(seed)
 
 
+BatchTransform = Callable[[dict[str, Any], int], dict[str, Any]]
+"""``transform(batch, step) -> batch``: training-time data treatment of the collated batch taken at
+``step`` (0-based), already on the device. It must draw its randomness from ``(seed, step)``
+only (never the global generators), so that a resumed run sees the same batches."""
+
+
 def train(
     model: AwdaNet | TosviNet,
     dataset: SampleDataset,
@@ -99,12 +106,20 @@ def train(
     snapshot_dir: Path | str,
     *,
     on_step: Callable[[int, dict[str, float]], None] | None = None,
+    transform: BatchTransform | None = None,
+    on_snapshot: Callable[[int, Path], None] | None = None,
+    training_record: dict[str, Any] | None = None,
+    on_start: Callable[[int], None] | None = None,
 ) -> TrainResult:
     """Train ``model`` in place up to ``config.max_steps``, writing snapshots to ``snapshot_dir``.
 
     With ``config.resume`` and a snapshot in ``snapshot_dir``, the latest one is loaded first
     (model, optimizer, step, RNG states); a snapshot of another architecture or config is refused.
-    ``on_step(step, loss_dict)`` is called after every step (progress display, logging).
+    ``on_start(start_step)`` is called once the start step is known (0 or the resumed one);
+    ``on_step(step, info)`` after every step, with the model's loss dict plus ``data_s`` (reading
+    and treating the batch) and ``compute_s`` (forward, backward, optimizer) [s];
+    ``on_snapshot(step, path)`` after each snapshot is written. ``transform`` is applied to every
+    collated batch (:data:`BatchTransform`); ``training_record`` is stored in every snapshot.
     """
     if len(dataset) == 0:
         raise UsageError("the training dataset is empty")
@@ -123,10 +138,16 @@ def train(
         _seed_everything(config.seed)
     model.train()
     step = result.start_step
+    if on_start is not None:
+        on_start(step)
     while step < config.max_steps:
+        t0 = time.perf_counter()
         indices = batch_indices(step, config.batch_size, len(dataset), config.seed)
         batch = default_collate([dataset[i] for i in indices])
         batch = {k: v.to(device) if isinstance(v, torch.Tensor) else v for k, v in batch.items()}
+        if transform is not None:
+            batch = transform(batch, step)
+        t1 = time.perf_counter()
         loss, info = model.compute_loss(batch)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
@@ -134,6 +155,9 @@ def train(
         step += 1
         result.losses.append(info["loss"])
         if on_step is not None:
+            if device.type == "cuda":
+                torch.cuda.synchronize(device)
+            info = {**info, "data_s": t1 - t0, "compute_s": time.perf_counter() - t1}
             on_step(step, info)
         if step % config.snapshot_every_steps == 0 or step == config.max_steps:
             path = save_snapshot(
@@ -142,7 +166,10 @@ def train(
                 step=step,
                 optimizer=optimizer,
                 train_config=config,
+                training=training_record,
             )
             result.snapshots.append(path)
+            if on_snapshot is not None:
+                on_snapshot(step, path)
     result.end_step = step
     return result
