@@ -291,9 +291,11 @@ def _frames_and_arrays(root: Path) -> dict[str, object]:
 
 @pytest.mark.slow
 def test_sigkill_then_resume_equals_two_worker_run(tiny: Path, tmp_path: Path) -> None:
-    """1 worker, killed after its first shard and resumed == 2 workers uninterrupted."""
+    """1 worker, one episode per job, killed after its first shard and resumed == 2 workers,
+    five episodes per job, uninterrupted."""
     out = tmp_path / "killed"
     cmd = [sys.executable, "-m", "awda_bench", *TINY_ARGS, "--out", str(out), "--workers", "1"]
+    cmd += ["--chunk-episodes", "1"]  # a shard stays unconsolidated until its unit's next job
     proc = subprocess.Popen(
         cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
     )
@@ -419,29 +421,33 @@ def _fake_episode(job, success: bool):
 
 
 class FakeRunner:
-    """Plays jobs in order without simulation: attempts in ``fail`` are discarded, attempts in
-    ``error`` raise (an error result)."""
+    """Runs the real attempt sequence (run_unit_job) without simulation: attempts in ``fail``
+    are discarded, attempts in ``error`` raise."""
 
     def __init__(self, fail: set[int] = frozenset(), error: set[int] = frozenset()) -> None:
-        self.fail, self.error, self.played = fail, error, []
+        self.fail, self.error = fail, error
+        self.played: list[tuple[str, int]] = []
+        self.replayed: list[tuple[str, int]] = []
 
     def run(self, jobs, on_result) -> None:
         from collections import deque
 
-        from awda_bench.data.pool import JobResult
+        from awda_bench.data.pool import run_unit_job
+
+        def record(attempt):
+            self.played.append((attempt.role, attempt.attempt))
+            if attempt.attempt in self.error:
+                raise RuntimeError("boom")
+            return _fake_episode(attempt, attempt.attempt not in self.fail)
+
+        def replay(attempt):
+            self.replayed.append((attempt.role, attempt.attempt))
 
         queue = deque(jobs)
         while queue:
             job = queue.popleft()
-            self.played.append((job.role, job.attempt))
-            if job.attempt in self.error:
-                queue.extend(on_result(JobResult(job=job, error="Traceback\nRuntimeError: boom")))
-            else:
-                queue.extend(
-                    on_result(
-                        JobResult(job=job, data=_fake_episode(job, job.attempt not in self.fail))
-                    )
-                )
+            config = tiny_config(Path("unused"))
+            queue.extend(on_result(run_unit_job(job, config, record, replay)))
 
 
 def _fake_config(out: Path, **kw) -> CollectConfig:
@@ -478,16 +484,26 @@ def test_failed_attempts_are_replaced_and_counted(tmp_path: Path) -> None:
 
 def test_errors_are_kept_apart_and_retried_on_rerun(tmp_path: Path) -> None:
     first = run_collect(_fake_config(tmp_path), runner=FakeRunner(error={1}))
-    assert first.errors == 1 and first.kept == 2 and first.discarded == 0 and not first.complete
-    assert "attempt 1: RuntimeError: boom" in first.error_messages[0]
+    assert first.errors == 1 and first.kept == 1 and first.discarded == 0 and not first.complete
+    assert "agent/pick_place/task_00: RuntimeError: boom" in first.error_messages[0]
     assert json.loads((tmp_path / MANIFEST).read_text())["complete"] is False
     again = FakeRunner()
     second = run_collect(_fake_config(tmp_path), runner=again)
-    assert again.played == [("agent", 1)]  # only the errored attempt is re-recorded
-    assert second.complete and second.already == 2 and second.kept == 1
+    # attempt 0 is replayed (the env's history), only the missing ones are recorded
+    assert again.replayed == [("agent", 0)] and again.played == [("agent", 1), ("agent", 2)]
+    assert second.complete and second.already == 1 and second.kept == 2
     # resumed under other code than the first episodes': completed, with a warning
     assert "partly recorded by other code (code_sha256 000000000000)" in second.warnings[0]
     assert json.loads((tmp_path / MANIFEST).read_text())["code_sha256"] == ["0" * 64]
+
+
+def test_chunks_replay_the_units_history(tmp_path: Path) -> None:
+    runner = FakeRunner(fail={1})
+    result = run_collect(_fake_config(tmp_path, chunk_episodes=1), runner=runner)
+    assert result.complete and result.kept == 3 and result.discarded == 1
+    assert runner.played == [("agent", 0), ("agent", 1), ("agent", 2), ("agent", 3)]
+    # every chunk starts in a fresh env and replays the unit's earlier attempts in order
+    assert runner.replayed == [("agent", 0), ("agent", 0), ("agent", 1), ("agent", 2)]
 
 
 def test_a_task_the_expert_always_fails_gives_up(tmp_path: Path) -> None:

@@ -89,6 +89,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--tasks-dir", type=Path, default=SUITES_DIR, help=argparse.SUPPRESS)
+    parser.add_argument("--chunk-episodes", type=int, default=5, help=argparse.SUPPRESS)
     return parser
 
 
@@ -119,6 +120,7 @@ def config_from_args(args: argparse.Namespace) -> CollectConfig:
         tasks=tasks,
         jpeg_quality=args.jpeg_quality,
         episode_timeout_s=args.episode_timeout,
+        chunk_episodes=args.chunk_episodes,
         suites_dir=args.tasks_dir,
         progress=not args.no_progress,
     )

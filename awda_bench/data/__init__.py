@@ -2,8 +2,9 @@
 
 Data flows one way, mirroring the evaluation path (suite -> specs -> workers -> records -> store)::
 
-    suite + CollectConfig --plan.py--> seeded CollectJobs (fixed before scheduling)
-        --pool.py (worker processes)--> recorder.py plays one job: EpisodeData (frames as JPEG)
+    suite + CollectConfig --plan.py--> units, seeded attempts (fixed before scheduling)
+        --pool.py (worker processes)--> one CollectJob per unit chunk: fresh env, earlier attempts
+          replayed, recorder.py records the next ones: EpisodeData (frames as JPEG)
         --trajectory_file.py--> one shard per episode (atomic) --> one ManiSkill file per unit
         --collect.py--> manifest.json (fingerprint, counts)
     DATA_DIR --datasets.py--> torch Datasets in the batch formats of awda_bench.models

@@ -26,7 +26,7 @@ from typing import Any
 from tqdm import tqdm
 
 from awda_bench.data.config import ROLE_SYNTHESIZED, CollectConfig
-from awda_bench.data.plan import CollectJob, CollectPlan, Unit, code_sha256, make_job, make_plan
+from awda_bench.data.plan import CollectJob, CollectPlan, Unit, code_sha256, make_plan
 from awda_bench.data.pool import InlineRunner, JobResult, JobRunner, ProcessRunner
 from awda_bench.data.trajectory_file import (
     consolidate_unit,
@@ -168,18 +168,22 @@ class _UnitState:
         self.unit = unit
         self.kept = kept
         self.discarded = discarded
-        self.next_attempt = unit.planned + len(discarded)
 
     @property
     def finished(self) -> bool:
-        return (
-            len(self.kept) >= self.unit.planned
-            and len(self.kept) + len(self.discarded) >= self.next_attempt
-        )
+        return len(self.kept) >= self.unit.planned
 
-    def missing(self) -> list[int]:
-        done = set(self.kept) | self.discarded
-        return [i for i in range(self.next_attempt) if i not in done]
+    def job(self, plan: CollectPlan, config: CollectConfig) -> CollectJob:
+        """The job recording this unit's next chunk."""
+        return CollectJob(
+            role=self.unit.role,
+            task=self.unit.task,
+            planned=self.unit.planned,
+            kept=tuple(sorted(self.kept)),
+            discarded=tuple(sorted(self.discarded)),
+            max_attempts=plan.max_attempts(self.unit, config.max_attempts_factor),
+            chunk=config.chunk_episodes,
+        )
 
 
 def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> CollectResult:
@@ -202,7 +206,7 @@ def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> Colle
         if state.finished:
             finished.append(state)
         else:
-            jobs += [make_job(config, unit.role, unit.task, i) for i in state.missing()]
+            jobs.append(state.job(plan, config))
 
     try:
         root.mkdir(parents=True, exist_ok=True)
@@ -235,45 +239,43 @@ def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> Colle
     def on_result(res: JobResult) -> list[CollectJob]:
         state = states[res.job.unit]
         unit = state.unit
-        if res.data is None:
+        for data in res.episodes:
+            result.episode_s += data.timing.get("wall_s", 0.0)
+            result.render_s += data.timing.get("render_s", 0.0)
+            result.frames += int(data.timing.get("frames", 0))
+            result.steps += data.steps
+            if data.success:
+                path = write_shard(root, unit.name, data)
+                state.kept[data.job.attempt] = path
+                result.kept += 1
+                result.bytes_kept += path.stat().st_size
+                bar.update(1)
+            else:
+                write_discard(root, unit.name, data)
+                state.discarded.add(data.job.attempt)
+                result.discarded += 1
+        rate = result.frames / result.render_s if result.render_s else 0.0
+        bar.set_postfix(discarded=result.discarded, errors=result.errors, fps=f"{rate:.0f}")
+        if state.finished:
+            _consolidate(root, plan, state)
+            return []
+        if res.error is not None:
             result.errors += 1
             last = (res.error or "").strip().splitlines()[-1:] or [""]
-            message = f"{unit.name} attempt {res.job.attempt}: {last[0]}"
+            message = f"{unit.name}: {last[0]}"
             result.error_messages.append(message)
             bar.write(f"error: {message}")
             return []
-        data = res.data
-        result.episode_s += data.timing.get("wall_s", 0.0)
-        result.render_s += data.timing.get("render_s", 0.0)
-        result.frames += int(data.timing.get("frames", 0))
-        result.steps += data.steps
-        follow: list[CollectJob] = []
-        if data.success:
-            path = write_shard(root, unit.name, data)
-            state.kept[res.job.attempt] = path
-            result.kept += 1
-            result.bytes_kept += path.stat().st_size
-            bar.update(1)
-        else:
-            write_discard(root, unit.name, data)
-            state.discarded.add(res.job.attempt)
-            result.discarded += 1
-            if state.next_attempt < plan.max_attempts(unit, config.max_attempts_factor):
-                follow.append(make_job(config, unit.role, unit.task, state.next_attempt))
-                state.next_attempt += 1
-            else:
-                result.errors += 1
-                message = (
-                    f"{unit.name}: gave up after {state.next_attempt} attempts "
-                    f"({len(state.discarded)} failed); the expert is broken on this task"
-                )
-                result.error_messages.append(message)
-                bar.write(f"error: {message}")
-        if state.finished:
-            _consolidate(root, plan, state)
-        rate = result.frames / result.render_s if result.render_s else 0.0
-        bar.set_postfix(discarded=result.discarded, errors=result.errors, fps=f"{rate:.0f}")
-        return follow
+        if res.gave_up:
+            result.errors += 1
+            message = (
+                f"{unit.name}: gave up after {res.job.max_attempts} attempts "
+                f"({len(state.discarded)} failed); the expert is broken on this task"
+            )
+            result.error_messages.append(message)
+            bar.write(f"error: {message}")
+            return []
+        return [state.job(plan, config)]  # the unit's next chunk
 
     t0 = time.perf_counter()
     try:

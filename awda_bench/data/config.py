@@ -116,6 +116,9 @@ class CollectConfig:
     """Only these tasks of the split (empty: all of them)."""
     jpeg_quality: int = 90
     """JPEG quality of the third-person frames (OpenCV scale 0-100)."""
+    chunk_episodes: int = 5
+    """Successful episodes one job records (a killed run re-records at most this many per
+    worker); never changes the data (see :class:`~awda_bench.data.plan.CollectJob`)."""
     max_attempts_factor: int = 3
     """A unit gives up (error) after ``factor * episodes + 10`` attempts: the expert is broken."""
     episode_timeout_s: float = 600.0
@@ -149,6 +152,8 @@ class CollectConfig:
             raise UsageError(f"--jpeg-quality must be in 1..100, got {self.jpeg_quality}")
         if self.episode_timeout_s <= 0:
             raise UsageError(f"--episode-timeout must be > 0, got {self.episode_timeout_s}")
+        if self.chunk_episodes < 1:
+            raise UsageError(f"chunk_episodes must be >= 1, got {self.chunk_episodes}")
         if self.max_attempts_factor < 1:
             raise UsageError(f"max_attempts_factor must be >= 1, got {self.max_attempts_factor}")
 

@@ -2,17 +2,19 @@
 
 A *unit* is ``(role, task)``; it must end with ``planned`` successful episodes. Attempt ``i`` of a
 unit has a seed hashed from ``(suite, base seed, task, i, "collect-<split>-<role>")``
-(:func:`awda_bench.harness.episode_specs.derive_seed`), never drawn from a shared generator, so
-what attempt ``i`` records does not depend on the worker count or order. Evaluation hashes the
-roles ``agent``/``demo``, so collected scenes are independent of evaluated ones.
+(:func:`awda_bench.harness.episode_specs.derive_seed`), never drawn from a shared generator.
+Evaluation hashes the roles ``agent``/``demo``, so collected scenes are independent of evaluated
+ones.
 
-Which attempts are kept::
+Which attempts are kept, and in which env history each is recorded::
 
-    attempts 0 .. planned-1 are scheduled; each failed attempt schedules the next unused index
+    attempts 0, 1, 2, ... of a unit are played in order, each in an env that has played exactly
+    the unit's earlier attempts (a job builds a fresh env and replays those unrendered first)
     => the unit holds the successful attempts among the shortest prefix 0..M-1 that contains
        `planned` successes, and `M - planned` attempts are counted as discards
 
-That prefix depends on the seeds only, so 1 or 2 workers (or a resumed run) keep the same episodes.
+Both the prefix and every recorded frame depend on the seeds only, so 1 or 2 workers, any chunk
+size, and a run resumed after a kill record byte-identical episodes (see :class:`CollectJob`).
 
 Splits: pick-and-place (``episode_unit = "task"``) trains on tasks 0-13 and holds out 14-15. For
 MOSAIC (``episode_unit = "family"``) the held-out unit is a whole family, so ``train`` collects
@@ -56,8 +58,8 @@ PACKAGE_DIR = Path(__file__).resolve().parent.parent
 
 
 @dataclass(frozen=True)
-class CollectJob:
-    """One attempt of one unit: the worker resets ``task``'s env with ``seed`` and records."""
+class Attempt:
+    """One attempt of one unit: reset ``task``'s env with ``seed`` and play the role."""
 
     role: str
     """``agent``, ``demonstrator`` or ``synthesized``."""
@@ -67,6 +69,36 @@ class CollectJob:
     """Attempt index within the unit (0-based)."""
     seed: int
     """Scene seed (``env.reset(seed=seed)``) and the synthesis waypoint generator's seed."""
+
+    @property
+    def unit(self) -> tuple[str, int]:
+        return (self.role, self.task)
+
+
+@dataclass(frozen=True)
+class CollectJob:
+    """Record the next ``chunk`` successful attempts of a unit, in a freshly built env.
+
+    A PhysX scene's history leaks into later episodes (measured: the same seed played first and
+    second in one env differs by ~1e-3 rad once the fingers close on an object), so an attempt's
+    recording is reproducible only with the same env history. The worker therefore builds a fresh
+    env per job and first *replays* (unrendered, ~20x faster than recording) the unit's attempts
+    already done, in order: attempt ``i`` is always recorded after exactly attempts ``0..i-1`` of
+    its unit, whatever the worker count, the order of units, or a resume after a kill.
+    """
+
+    role: str
+    task: int
+    planned: int
+    """Successful episodes the unit must end with."""
+    kept: tuple[int, ...]
+    """Attempts already kept (shards on disk)."""
+    discarded: tuple[int, ...]
+    """Attempts already discarded."""
+    max_attempts: int
+    """The unit gives up (an error) after this many attempts."""
+    chunk: int
+    """Successful attempts this job records at most (the resume granularity)."""
 
     @property
     def unit(self) -> tuple[str, int]:
@@ -118,8 +150,8 @@ def job_seed(config: CollectConfig, task: int, attempt: int, role: str) -> int:
     return derive_seed(config.suite, config.seed, task, attempt, f"collect-{config.split}-{role}")
 
 
-def make_job(config: CollectConfig, role: str, task: int, attempt: int) -> CollectJob:
-    return CollectJob(role, task, attempt, job_seed(config, task, attempt, role))
+def make_attempt(config: CollectConfig, role: str, task: int, attempt: int) -> Attempt:
+    return Attempt(role, task, attempt, job_seed(config, task, attempt, role))
 
 
 @dataclass(frozen=True)

@@ -6,10 +6,11 @@ out, so another backend (Ray) can implement :class:`JobRunner` the same way::
     parent                                  worker k (spawned; OMP_NUM_THREADS=1)
       start ------------------------------>   recorder = EpisodeRecorder(config)
             <------------------------- ("ready", pid)
-      CollectJob ------------------------->   data = recorder.record(job)
-            <------------------- ("result", JobResult)   data, or error + traceback
-      ... on_result(result) -> follow-up jobs (a discarded attempt's replacement) join the queue
-      ... watchdog: a job older than episode_timeout_s -> kill worker, error result, respawn
+      CollectJob ------------------------->   fresh env; replay the unit's done attempts,
+                                              record its next `chunk` successful ones
+            <------------------- ("result", JobResult)   episodes, and/or error + traceback
+      ... on_result(result) -> follow-up jobs (the unit's next chunk) join the queue
+      ... watchdog: a job older than job_timeout_s -> kill worker, error result, respawn
       None ------------------------------->   close envs, exit
 
 A worker that cannot build its recorder stops the collection (:class:`WorkerStartError`).
@@ -23,24 +24,28 @@ import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any, Protocol
 
 from awda_bench.data.config import CollectConfig
-from awda_bench.data.plan import CollectJob
+from awda_bench.data.plan import Attempt, CollectJob, make_attempt
 from awda_bench.data.recorder import EpisodeData, EpisodeRecorder
 from awda_bench.harness.worker_pool import WorkerStartError, _single_threaded_children
 
 
 @dataclass
 class JobResult:
-    """What came back for one job: the recorded episode, or the error that stopped it."""
+    """What came back for one job: the attempts it recorded (kept and discarded), in order, and
+    the error that stopped it, if any."""
 
     job: CollectJob
-    data: EpisodeData | None = None
+    episodes: list[EpisodeData] = field(default_factory=list)
+    """Recorded attempts in attempt order (``data.success``: kept or discarded)."""
     error: str | None = None
-    """Traceback or watchdog message; ``None`` when ``data`` is set."""
+    """Traceback or watchdog message; the unit is left unfinished (retried on re-run)."""
+    gave_up: bool = False
+    """The unit reached ``job.max_attempts`` without ``job.planned`` successes."""
 
 
 OnResult = Callable[[JobResult], Iterable[CollectJob]]
@@ -53,12 +58,64 @@ class JobRunner(Protocol):
     def run(self, jobs: Sequence[CollectJob], on_result: OnResult) -> None: ...
 
 
-def play(recorder: EpisodeRecorder, job: CollectJob) -> JobResult:
-    """Record ``job``; an exception becomes an error result carrying its traceback."""
+def run_unit_job(
+    job: CollectJob,
+    config: CollectConfig,
+    record: Callable[[Attempt], EpisodeData],
+    replay: Callable[[Attempt], None],
+) -> JobResult:
+    """The attempt sequence of one job (see :class:`~awda_bench.data.plan.CollectJob`)::
+
+        for i = 0, 1, 2, ...  until the unit has `planned` successes or this job `chunk` new ones:
+            i already kept or discarded  -> replay(i)   (the env's history, nothing recorded)
+            otherwise                    -> record(i)  (kept if it succeeded, else discarded)
+        i reaching max_attempts first -> gave_up
+
+    An exception stops the job; what it recorded before is returned with the error.
+    """
+    result = JobResult(job=job)
+    done = set(job.kept) | set(job.discarded)
+    successes, new, i = 0, 0, 0
     try:
-        return JobResult(job=job, data=recorder.record(job))
-    except Exception:  # recorded with its traceback; the collection goes on
+        while successes < job.planned and new < job.chunk and i < job.max_attempts:
+            attempt = make_attempt(config, job.role, job.task, i)
+            if i in done:
+                replay(attempt)
+                successes += i in job.kept
+            else:
+                data = record(attempt)
+                result.episodes.append(data)
+                successes += data.success
+                new += data.success
+            i += 1
+        result.gave_up = successes < job.planned and new < job.chunk
+    except Exception:  # reported with its traceback; the collection goes on
+        result.error = traceback.format_exc()
+    return result
+
+
+def job_timeout_s(config: CollectConfig, job: CollectJob | None) -> float:
+    """Watchdog limit of a job [s]: ``episode_timeout_s`` per episode it may play."""
+    if job is None:
+        return config.episode_timeout_s
+    return config.episode_timeout_s * (job.chunk + len(job.kept) + len(job.discarded))
+
+
+def play(recorder: EpisodeRecorder, job: CollectJob) -> JobResult:
+    """Record ``job`` in a freshly built env (closed afterwards)."""
+    try:
+        env, env_info = recorder.build_env(job.task, job.role)
+    except Exception:
         return JobResult(job=job, error=traceback.format_exc())
+    try:
+        return run_unit_job(
+            job,
+            recorder.config,
+            record=lambda attempt: recorder.record(env, env_info, attempt),
+            replay=lambda attempt: recorder.replay(env, attempt),
+        )
+    finally:
+        env.close()
 
 
 class InlineRunner:
@@ -82,6 +139,7 @@ def _worker_main(conn: Connection, config: CollectConfig) -> None:
         recorder = EpisodeRecorder(config)
         # build the first env now: a broken renderer stops the collection at start-up
         recorder.env_for(recorder.suite.tasks[0].index, "agent")
+        recorder.close()  # jobs build their own envs
     except BaseException as exc:
         conn.send(("fatal", f"{type(exc).__name__}: {exc}"))
         conn.close()
@@ -141,7 +199,6 @@ class ProcessRunner:
         if not self._queue:
             return
         slots = [_Slot(self._ctx, self.config) for _ in range(min(self.workers, len(jobs)))]
-        timeout_s = self.config.episode_timeout_s
         try:
             while self._queue or any(s.job is not None for s in slots):
                 for slot in slots:
@@ -156,8 +213,9 @@ class ProcessRunner:
                             f"a collect worker did not build its env within "
                             f"{self.start_timeout_s:.0f} s; check `python -m awda_bench doctor`"
                         )
+                    timeout_s = job_timeout_s(self.config, slot.job)
                     if slot.job is not None and now > slot.since + timeout_s:
-                        message = f"watchdog: episode exceeded {timeout_s:g} s; worker killed"
+                        message = f"watchdog: job exceeded {timeout_s:g} s; worker killed"
                         self._queue.extend(on_result(JobResult(job=slot.job, error=message)))
                         slots[i] = self._respawn(slot)
         finally:

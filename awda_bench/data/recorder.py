@@ -33,7 +33,7 @@ from awda_bench.data.config import (
     CollectConfig,
     SynthesisConfig,
 )
-from awda_bench.data.plan import CollectJob, code_sha256
+from awda_bench.data.plan import Attempt, code_sha256
 from awda_bench.suites import Suite, load_suite
 
 ENV_CACHE_SIZE = 4
@@ -44,7 +44,7 @@ ENV_CACHE_SIZE = 4
 class EpisodeData:
     """Everything one attempt recorded (no batch dimension)."""
 
-    job: CollectJob
+    job: Attempt
     success: bool
     """Kept or discarded: the task succeeded at some step (``success_once``; synthesis: every
     waypoint reached). The JSON's ``success`` stays ManiSkill's: success after the last step."""
@@ -139,7 +139,8 @@ class EpisodeRecorder:
             "sensor_configs": sensors,
         }
 
-    def env_for(self, task: int, role: str) -> tuple[Any, dict[str, Any]]:
+    def build_env(self, task: int, role: str) -> tuple[Any, dict[str, Any]]:
+        """A freshly built env for ``role`` serving ``task``, and its ManiSkill ``env_info``."""
         import gymnasium as gym
 
         import awda_bench.envs  # noqa: F401  (registers the envs and robots)
@@ -147,28 +148,31 @@ class EpisodeRecorder:
         from awda_bench.envs.embodiments import embodiment
         from awda_bench.render_device import render_backend
 
-        embodiment_name = ROLE_DEMONSTRATOR if role == ROLE_DEMONSTRATOR else ROLE_AGENT
-        uid = EMBODIMENT_UIDS[embodiment_name]
-        key = (self.suite.env_id_for(task), uid)
-        if key in self._envs:
-            self._envs.move_to_end(key)
-            return self._envs[key]
-        while len(self._envs) >= ENV_CACHE_SIZE:
-            _, (old, _) = self._envs.popitem(last=False)
-            old.close()
+        uid = EMBODIMENT_UIDS[_embodiment(role)]
+        env_id = self.suite.env_id_for(task)
         kwargs = self.env_kwargs(uid, embodiment(uid).control_mode)
         env = gym.make(
-            key[0],
+            env_id,
             max_episode_steps=self.suite.horizon_steps,
             render_backend=render_backend(),
             **kwargs,
         )
         env_info = {
-            "env_id": key[0],
+            "env_id": env_id,
             "env_kwargs": kwargs,
             "max_episode_steps": self.suite.horizon_steps,
         }
-        self._envs[key] = (env, env_info)
+        return env, env_info
+
+    def env_for(self, task: int, role: str) -> tuple[Any, dict[str, Any]]:
+        """An env for inspection (start-up checks, tests), built once and closed by
+        :meth:`close`; recording always uses a fresh one (see :class:`CollectJob`)."""
+        key = (self.suite.env_id_for(task), _embodiment(role))
+        if key not in self._envs:
+            while len(self._envs) >= ENV_CACHE_SIZE:
+                _, (old, _) = self._envs.popitem(last=False)
+                old.close()
+            self._envs[key] = self.build_env(task, role)
         return self._envs[key]
 
     def close(self) -> None:
@@ -176,12 +180,24 @@ class EpisodeRecorder:
             env.close()
         self._envs.clear()
 
-    def record(self, job: CollectJob) -> EpisodeData:
-        """Play and record ``job``; exceptions propagate (the pool turns them into errors)."""
+    def replay(self, env: Any, job: Attempt) -> None:
+        """Play ``job`` again without recording anything (rebuilds the env's history)."""
+        from awda_bench.harness.episode_runner import seed_globals
+
+        seed_globals(job.seed)
+        reset_kwargs = {"seed": job.seed, "options": {"task": self.suite.task(job.task).reset_task}}
+        obs, _ = env.reset(**reset_kwargs)
+        rec = _Stepper(env)
+        if job.role == ROLE_SYNTHESIZED:
+            self._play_synthesis(env, rec, job.seed)
+        else:
+            self._play_expert(env, rec, obs, job)
+
+    def record(self, env: Any, env_info: dict[str, Any], job: Attempt) -> EpisodeData:
+        """Play and record ``job`` on ``env``; exceptions propagate (the pool reports them)."""
         from awda_bench.harness.episode_runner import seed_globals
 
         t_start = time.perf_counter()
-        env, env_info = self.env_for(job.task, job.role)
         task = self.suite.task(job.task)
         seed_globals(job.seed)
         reset_kwargs = {"seed": job.seed, "options": {"task": task.reset_task}}
@@ -215,7 +231,7 @@ class EpisodeRecorder:
                 "family": task.family,
                 "variation": task.reset_task,
                 "role": job.role,
-                "embodiment": ROLE_DEMONSTRATOR if job.role == ROLE_DEMONSTRATOR else ROLE_AGENT,
+                "embodiment": _embodiment(job.role),
                 "robot_uid": base.robot_uids,
                 "attempt": job.attempt,
                 "kept": success,
@@ -232,15 +248,14 @@ class EpisodeRecorder:
         return data
 
     def _play_expert(
-        self, env: Any, rec: _Recording, obs: Any, job: CollectJob
+        self, env: Any, rec: _Stepper, obs: Any, job: Attempt
     ) -> tuple[bool, dict[str, Any]]:
         from awda_bench.demo_recording import SETTLE_STEPS
         from awda_bench.experts import make_expert
         from awda_bench.policies.base import EpisodeContext, EpisodeSpec
 
         base = env.unwrapped
-        embodiment_name = ROLE_DEMONSTRATOR if job.role == ROLE_DEMONSTRATOR else ROLE_AGENT
-        expert = make_expert(self.suite.name, embodiment_name)
+        expert = make_expert(self.suite.name, _embodiment(job.role))
         spec = EpisodeSpec(self.suite.name, job.task, job.attempt, job.seed, job.seed)
         expert.reset(EpisodeContext(env=base, spec=spec))
         settle = 0
@@ -259,7 +274,7 @@ class EpisodeRecorder:
         success = bool(np.asarray(_numpy(info[key])).reshape(-1)[0])
         return success, {"expert_done": bool(expert.done)}
 
-    def _play_synthesis(self, env: Any, rec: _Recording, seed: int) -> tuple[bool, dict[str, Any]]:
+    def _play_synthesis(self, env: Any, rec: _Stepper, seed: int) -> tuple[bool, dict[str, Any]]:
         from awda_bench.primitives.base import GRIP_OPEN, RobotState, hold_action
         from awda_bench.primitives.config import FreeSpaceConfig
         from awda_bench.primitives.free_space import FreeSpace
@@ -299,17 +314,38 @@ class EpisodeRecorder:
         }
 
 
+def _embodiment(role: str) -> str:
+    """The embodiment acting in ``role`` (synthesis is recorded by the agent)."""
+    return ROLE_DEMONSTRATOR if role == ROLE_DEMONSTRATOR else ROLE_AGENT
+
+
+class _Stepper:
+    """Steps the env and keeps the last info; records nothing (replays)."""
+
+    def __init__(self, env: Any) -> None:
+        self.env = env
+        self.last_info: dict[str, Any] = {}
+
+    def capture_state(self, truth: bool) -> None:
+        """Nothing to capture when replaying."""
+
+    def step(self, action: np.ndarray) -> Any:
+        obs, _, _, _, info = self.env.step(action)
+        self.last_info = info
+        return obs
+
+
 def _numpy(value: Any) -> np.ndarray:
     if hasattr(value, "detach"):
         return value.detach().cpu().numpy()
     return np.asarray(value)
 
 
-class _Recording:
+class _Recording(_Stepper):
     """Accumulates one episode's per-state and per-action arrays."""
 
     def __init__(self, env: Any, config: CollectConfig, with_depth: bool) -> None:
-        self.env = env
+        super().__init__(env)
         self.base = env.unwrapped
         self.config = config
         self.with_depth = with_depth
@@ -325,7 +361,6 @@ class _Recording:
         self.truth: dict[str, list[bool]] = {}
         self.actions: list[np.ndarray] = []
         self.success: list[bool] = []
-        self.last_info: dict[str, Any] = {}
         self.render_s = 0.0
         self.third_person = _camera_params(env, "third_person")
 
@@ -359,7 +394,7 @@ class _Recording:
         self.last_info = info
         return obs
 
-    def finish(self, job: CollectJob, success: bool) -> EpisodeData:
+    def finish(self, job: Attempt, success: bool) -> EpisodeData:
         from awda_bench.mining import PressMiningConfig, mine_grasp, mine_press
         from awda_bench.trajectory import Trajectory
 
