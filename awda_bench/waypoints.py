@@ -19,6 +19,8 @@ primitive already does) instead of the corner above the goal, and the carry cuts
 through the goal bin's wall.
 
 If the mandatory points alone exceed K, the latest ones are dropped first except the final step.
+The release waypoint (the last grasp-attributed one) takes the TCP position of the step after it,
+where the gripper was commanded open (it keeps the grasp flag: carry there, then drop).
 Executed with :class:`~awda_bench.primitives.executor.WaypointExecutor`: the approach corner (the
 waypoint before the grasp) is raised 15 cm, the grasp point triggers the grasp primitive,
 grasp-attributed points after it are carried to, and the first free point after them drops the
@@ -132,4 +134,11 @@ def extract_waypoints(
     if attributes.ndim == 1:
         attributes = attributes[:, None]
     idx = extract_waypoint_indices(path, attributes, K, grasp_lift_m)
-    return np.hstack([np.asarray(path, np.float64)[idx], attributes[idx].astype(np.float64)])
+    path = np.asarray(path, np.float64)
+    positions = path[idx].copy()
+    grasp_on = np.flatnonzero(attributes[:, 0])
+    if grasp_on.size and grasp_on[-1] + 1 < len(path):
+        # the release point is where the gripper was commanded open, one step after the last
+        # grasp-attributed step: at 2 cm per step the TCP still descends up to 2 cm in between
+        positions[idx == grasp_on[-1]] = path[grasp_on[-1] + 1]
+    return np.hstack([positions, attributes[idx].astype(np.float64)])

@@ -65,7 +65,10 @@ def test_pick_and_place_runs_grasp_carry_drop_in_order() -> None:
     names = [p.split(":")[0] for p in phases]
     compact = [n for i, n in enumerate(names) if i == 0 or n != names[i - 1]]
     assert compact == ["move", "grasp", "carry", "drop", "move", "done"]
-    assert [p for p in phases if p.startswith("grasp")][0] == "grasp:hover"
+    # the approach ends exactly on the raised waypoint, the hover point (finish_exactly): the
+    # grasp finds itself hovering and goes straight to its descent
+    assert [p for p in phases if p.startswith("grasp")][0] in ("grasp:hover", "grasp:descend")
+    assert ex.grasp_primitives[0].hover_reached
     # the target (not the distractor) ends on the floor at the goal; the gripper is open
     assert robot.held is None and target.bottom_z == 0.0
     assert np.linalg.norm(target.center_xy - [0.10, 0.30]) < 0.02
@@ -95,9 +98,22 @@ def test_only_one_grasp_per_episode() -> None:
 def test_done_executor_holds_still() -> None:
     robot, *_ = _scene()
     ex = WaypointExecutor(np.array([[0.3, 0.0, 0.34, 0.0]]), lambda: None)
-    a = ex.step(robot.state)  # within 2 cm already: finishes without moving
+    a = ex.step(robot.state)  # within 2 cm already: one step onto it exactly (finish_exactly)
+    assert not ex.done and np.allclose(a, [0, 0, -0.5, -1])
+    robot.step(a)
+    a = ex.step(robot.state)  # there: finishes without moving
     assert ex.done and np.allclose(a, [0, 0, 0, -1])
-    assert ex.log[0].steps == 0 and ex.log[0].reached
+    assert ex.log[0].steps == 1 and ex.log[0].reached
+
+
+def test_a_motion_ends_on_its_destination_not_2_cm_short() -> None:
+    robot, *_ = _scene()
+    ex = WaypointExecutor(np.array([[0.3, 0.2, 0.35, 0.0]]), lambda: None)
+    for _ in range(50):
+        if ex.done:
+            break
+        robot.step(ex.step(robot.state))
+    assert ex.done and robot.tcp_pos == pytest.approx([0.3, 0.2, 0.35], abs=1e-9)
 
 
 def test_grasp_budget_zero_turns_grasp_waypoints_into_moves() -> None:

@@ -65,7 +65,11 @@ def test_pick_place_keeps_the_mandatory_points_and_one_corner() -> None:
     W = extract_waypoints(path, g, K=5)
     assert W.shape == (5, 4)
     assert W[:, 3].tolist() == [0, 1, 1, 1, 0]  # approach, grasp, corner (carried), release, end
-    assert np.allclose(W[:, :3], path[idx])
+    # the release waypoint sits where the gripper was commanded open (one step after the last
+    # grasp-attributed step); the others on their own steps
+    expected = path[idx].copy()
+    expected[idx == t["release"]] = path[t["release"] + 1]
+    assert np.allclose(W[:, :3], expected)
 
 
 def test_more_waypoints_add_the_farthest_corners_first() -> None:

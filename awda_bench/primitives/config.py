@@ -44,9 +44,17 @@ class FreeSpaceConfig:
     step_budget: int = 60
     """Control steps after which the motion ends even if not reached (60 steps = 3 s, enough for
     1.2 m at full speed, more than the workspace diagonal)."""
+    finish_exactly: bool = True
+    """On reaching the tolerance, command the remaining displacement (< 2 cm: one step) once
+    before finishing, so the controller's target *is* the destination. With the tracking
+    controller the target is where the commands put it: stopping 2 cm short left it short, and a
+    cube released there missed its base (stack block gt-waypoints 0.4)."""
+    exact_tol_m: float = 0.002
+    """No finishing step when already this close [m]."""
 
     def __post_init__(self) -> None:
         _require_positive(self, "max_step_m", "reach_tol_m", "step_budget")
+        _require_non_negative(self, "exact_tol_m")
 
 
 @dataclass(frozen=True)

@@ -28,7 +28,8 @@ def straight_line_action(
 class FreeSpace:
     """Move the TCP to ``target`` in a straight line with a fixed gripper command.
 
-    Finishes when ``||p - target|| < reach_tol_m`` or after ``step_budget`` actions.
+    Finishes when ``||p - target|| < reach_tol_m`` (then, with ``finish_exactly``, after one more
+    step commanding the exact remaining displacement) or after ``step_budget`` actions.
     """
 
     def __init__(
@@ -46,9 +47,20 @@ class FreeSpace:
         """True if the motion ended within the tolerance (False if the budget ran out)."""
 
     def step(self, state: RobotState) -> np.ndarray | None:
-        if np.linalg.norm(self.target - state.tcp_pos) < self.config.reach_tol_m:
+        distance = float(np.linalg.norm(self.target - state.tcp_pos))
+        if distance < self.config.reach_tol_m:
+            finishing = (
+                self.config.finish_exactly
+                and not self.reached
+                and distance > self.config.exact_tol_m
+            )
             self.reached = True
-            return None
+            if not finishing:
+                return None
+            self.steps += 1
+            return straight_line_action(
+                state.tcp_pos, self.target, self.config.max_step_m, self.grip
+            )
         if self.steps >= self.config.step_budget:
             return None
         self.steps += 1
