@@ -16,12 +16,14 @@ from awda_bench.harness.ray_pool import RayActorPool
 
 
 class RecorderExecutor:
-    """What a collect actor holds: a recorder whose first env is built at start-up (a broken
-    renderer stops the collection before any job)."""
+    """What a collect actor holds: a recorder, as a local collect worker holds it. One env is
+    built at start-up (a broken renderer stops the collection before any job) and closed: each
+    job builds its own fresh env (:func:`awda_bench.data.pool.play`)."""
 
     def __init__(self, config: CollectConfig) -> None:
         self.recorder = EpisodeRecorder(config)
         self.recorder.env_for(self.recorder.suite.tasks[0].index, "agent")
+        self.recorder.close()
 
     def play(self, job: CollectJob) -> JobResult:
         return play(self.recorder, job)
