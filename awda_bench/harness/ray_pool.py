@@ -8,13 +8,13 @@ the driver) on one machine or a cluster. :class:`RayActorPool` schedules any job
     driver (the only writer)                       actor k (num_cpus=1, OMP_NUM_THREADS=1)
       ray.init(address) --- a private local instance, or a cluster (`ray start --head`)
       PoolActor.remote(build, config) ---------->   holds nothing yet
-      start() --------------------------------->   executor = build(config): its envs, built
-            <------------- ("ready", pid, host)      once and reused across jobs
+      start() --------------------------------->   executor = build(config): what a local
+            <------------- ("ready", pid, host)      worker holds (run: one env per env id, reused)
       play(job) ------------------------------->   result = executor.play(job)
             <-------------------------------- result  (an exception inside is the executor's to
                                                        turn into an error result)
       ... the next job is sent before on_result(result) runs: the actor plays while we write;
-          on_result may return follow-up jobs (collect: a discarded attempt's replacement)
+          on_result may return follow-up jobs (collect: a unit's next attempts)
       watchdog: a job older than job_timeout_s -> ray.kill(actor), lost(job) result, new actor
       actor or its node lost mid-job -> the job is queued again (at most LOST_WORKER_RETRIES
                                         times, then a lost(job) result), a new actor is started
@@ -27,9 +27,10 @@ Differences from the local pools, and why:
   error result, so a run always ends. Each job gets exactly one result per invocation: from the
   actor that finished it or from the driver (watchdog, retries spent), never both, because an
   actor is killed before its job is queued again or given up.
-- An actor that Ray cannot place (a cluster with fewer free CPUs than ``workers``) waits; the run
-  stops with :class:`~awda_bench.harness.worker_pool.WorkerStartError` only when *no* actor has
-  started within ``start_timeout_s``.
+- An actor that Ray cannot place (a cluster with fewer free CPUs than ``workers``) waits, and one
+  that dies while starting is replaced if another actor has started; the run stops with
+  :class:`~awda_bench.harness.worker_pool.WorkerStartError` when an actor reports that it cannot
+  build its envs, or when *no* actor has started (within ``start_timeout_s``, or at all).
 
 Ray is an optional extra (``pip install -e '.[ray]'``); without it :func:`require_ray` raises a
 one-line :class:`~awda_bench.errors.MissingExtraError`.
