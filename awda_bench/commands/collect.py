@@ -89,7 +89,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--tasks-dir", type=Path, default=SUITES_DIR, help=argparse.SUPPRESS)
-    parser.add_argument("--chunk-episodes", type=int, default=5, help=argparse.SUPPRESS)
+    parser.add_argument("--chunk-episodes", type=int, default=10, help=argparse.SUPPRESS)
     return parser
 
 

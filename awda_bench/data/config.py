@@ -116,9 +116,11 @@ class CollectConfig:
     """Only these tasks of the split (empty: all of them)."""
     jpeg_quality: int = 90
     """JPEG quality of the third-person frames (OpenCV scale 0-100)."""
-    chunk_episodes: int = 5
-    """Successful episodes one job records (a killed run re-records at most this many per
-    worker); never changes the data (see :class:`~awda_bench.data.plan.CollectJob`)."""
+    chunk_episodes: int = 10
+    """Successful episodes one job records: a killed run re-records at most this many per worker,
+    and every job pays an env build (~1 s) plus the first capture of each camera (~5 s on
+    lavapipe) plus the unrendered replay of its unit's earlier attempts. Never changes the data
+    (see :class:`~awda_bench.data.plan.CollectJob`)."""
     max_attempts_factor: int = 3
     """A unit gives up (error) after ``factor * episodes + 10`` attempts: the expert is broken."""
     episode_timeout_s: float = 600.0

@@ -12,6 +12,9 @@ from awda_bench.data.config import ROLES
 from awda_bench.data.datasets import CollectedData, EpisodeRef
 from awda_bench.errors import CorruptFileError
 
+MAX_SHEET_FRAME_WIDTH_PX = 200
+"""Frames wider than this are drawn at half size on the contact sheet."""
+
 
 @dataclass(frozen=True)
 class UnitRow:
@@ -156,7 +159,13 @@ def contact_sheet(
         chosen += [r for r in refs if r not in chosen][: episodes_per_role - len(chosen)]
         for ref in chosen:
             index = np.linspace(0, ref.steps, frames_per_episode).round().astype(int)
-            row = np.concatenate(list(data.frames(ref, index)), axis=1)
+            frames = data.frames(ref, index)
+            if frames.shape[2] > MAX_SHEET_FRAME_WIDTH_PX:  # halve big frames: a smaller PNG
+                h, w = frames.shape[1] // 2, frames.shape[2] // 2
+                frames = np.stack(
+                    [cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA) for f in frames]
+                )
+            row = np.concatenate(list(frames), axis=1)
             label = f"{role} task {ref.task} {ref.traj} ({ref.steps} steps)"
             cv2.putText(row, label, (4, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 0), 1)
             rows.append(row)
