@@ -13,4 +13,5 @@ COMMANDS: tuple[str, ...] = (
     "collect",
     "dataset",
     "replay",
+    "train",
 )

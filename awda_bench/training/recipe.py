@@ -1,0 +1,238 @@
+"""Training recipes: the data files in ``recipes/<name>.toml``, read into frozen dataclasses.
+
+A recipe fixes everything a Table S3 column's training needs apart from the column itself (the
+method and ablation, :mod:`awda_bench.training.columns`): image size and trunk, loss settings,
+batch, learning rate, steps and snapshot spacing, validation cadence, and the training-time data
+treatment (ADM's lambda range, shifts, colour jitter). ``paper`` is Table S2; ``small`` is sized
+by measurement for a 2-core CPU (numbers in its file). ``--recipe`` also takes a path to a
+``.toml`` of the same layout (tests use tiny ones).
+
+Layout::
+
+    name = "small"
+    suites = ["pick_place", "mosaic"]      # suites whose collections it trains on
+    [model]   image_height_px, image_width_px, demo_frames, attention_layers, attention_heads,
+              attention_head_dim, dropout, hidden_dim, feature_dim, backbone_weights,
+              points_per_segment, gamma, attribute_scale, trajectory_points,
+              frame_stack, mixture_components, depth_height_px, depth_width_px
+    [train]   batch_size, learning_rate, max_steps, snapshot_every_steps,
+              validate_every_steps, validation_batches, seed
+    [augment] adm_lambda_low, adm_lambda_high, shift_px, brightness, contrast, saturation
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
+from awda_bench.models.config import config_from_dict, config_to_dict
+
+RECIPES_DIR = Path(__file__).resolve().parent.parent.parent / "recipes"
+"""Where the recipe files live (``recipes/`` at the project root, beside ``tasks/``)."""
+
+
+def _need(ok: bool, owner: str, name: str, value: object, expected: str) -> None:
+    if not ok:
+        raise UsageError(f"recipe {owner}.{name} = {value!r} is invalid; expected {expected}")
+
+
+@dataclass(frozen=True)
+class ModelRecipe:
+    """Model and loss settings (the ``[model]`` table)."""
+
+    image_height_px: int = 240
+    """Third-person frame height [px]; the collection must have been recorded at this size."""
+    image_width_px: int = 320
+    """Third-person frame width [px]."""
+    demo_frames: int = 10
+    """Frames taken from the demonstration, first and last included (Table S2: 10)."""
+    attention_layers: int = 2
+    """Self-attention layers (Table S2: 2)."""
+    attention_heads: int = 4
+    """Heads per attention layer (Table S2: 4)."""
+    attention_head_dim: int = 64
+    """Channels per head's query/key/value."""
+    dropout: float = 0.1
+    """Dropout after each attention layer."""
+    hidden_dim: int = 256
+    """Post-transformer MLP hidden width (Table S2: 256)."""
+    feature_dim: int = 256
+    """Per-frame vector length."""
+    backbone_weights: str = "none"
+    """``none`` (random init: ImageNet weights cannot be downloaded here), ``imagenet``, or a
+    path to a local ResNet-18 ``state_dict``."""
+    points_per_segment: int = 12
+    """Interpolated points per polyline segment (AWDA loss)."""
+    gamma: float = 1e-3
+    """Soft-DTW temperature (Table S2: 0.001)."""
+    attribute_scale: float = 0.2
+    """Weight of the attribute channels in the Soft-DTW cost (reference: 0.2)."""
+    trajectory_points: int = 50
+    """Ground-truth trajectory points (reference: 50)."""
+    frame_stack: int = 6
+    """T-OSVI agent frames per sample (T-OSVI: 6)."""
+    mixture_components: int = 3
+    """T-OSVI logistic mixture components per action dimension."""
+    depth_height_px: int = 128
+    """T-OSVI +depth wrist depth height [px]; the collection must have this depth size."""
+    depth_width_px: int = 128
+    """T-OSVI +depth wrist depth width [px]."""
+
+    def __post_init__(self) -> None:
+        o = "model"
+        for name in ("image_height_px", "image_width_px"):
+            _need(getattr(self, name) >= 64, o, name, getattr(self, name), "an int >= 64")
+        for name in ("demo_frames", "trajectory_points"):
+            _need(getattr(self, name) >= 2, o, name, getattr(self, name), "an int >= 2")
+        _need(self.gamma > 0, o, "gamma", self.gamma, "a float > 0")
+        _need(self.frame_stack >= 2, o, "frame_stack", self.frame_stack, "an int >= 2")
+
+
+@dataclass(frozen=True)
+class TrainRecipe:
+    """The loop's schedule (the ``[train]`` table)."""
+
+    batch_size: int = 30
+    """Samples per step (Table S2: 30)."""
+    learning_rate: float = 5e-4
+    """Adam step size (Table S2: 5e-4)."""
+    max_steps: int = 100_000
+    """Steps to train (``--steps`` overrides)."""
+    snapshot_every_steps: int = 10_000
+    """Snapshot spacing (Table S2: 10k; ``--snapshot-every`` overrides)."""
+    validate_every_steps: int = 500
+    """Validation loss on held-out-task pairs every this many steps (and at every snapshot)."""
+    validation_batches: int = 4
+    """Batches of held-out pairs per validation (a fixed subset, the same every time)."""
+    seed: int = 0
+    """Batch order, ADM and augmentation draws, and the initial weights."""
+
+    def __post_init__(self) -> None:
+        o = "train"
+        for name in (
+            "batch_size",
+            "max_steps",
+            "snapshot_every_steps",
+            "validate_every_steps",
+            "validation_batches",
+        ):
+            _need(getattr(self, name) >= 1, o, name, getattr(self, name), "an int >= 1")
+        _need(self.learning_rate > 0, o, "learning_rate", self.learning_rate, "a float > 0")
+        _need(self.seed >= 0, o, "seed", self.seed, "an int >= 0")
+
+
+@dataclass(frozen=True)
+class AugmentRecipe:
+    """Training-time data treatment (the ``[augment]`` table; never applied to validation)."""
+
+    adm_lambda_low: float = 0.3
+    """ADM: lambda ~ U(low, high) per sample (reference: U(0.3, 1))."""
+    adm_lambda_high: float = 1.0
+    """ADM: upper end of lambda's range."""
+    shift_px: int = 4
+    """Random translation of each sample's demo frames and (independently) its agent frames by
+    up to this many pixels per axis, edges replicated. No flips and no rescaling: the labels are
+    world-frame metres and the camera does not move, so a shift only perturbs the image-to-world
+    mapping by a few pixels (0 disables)."""
+    brightness: float = 0.2
+    """Colour jitter: brightness factor ~ U(1 - b, 1 + b) (0 disables)."""
+    contrast: float = 0.2
+    """Colour jitter: contrast factor ~ U(1 - c, 1 + c) about each frame's mean grey."""
+    saturation: float = 0.2
+    """Colour jitter: saturation factor ~ U(1 - s, 1 + s) about each pixel's grey."""
+
+    def __post_init__(self) -> None:
+        o = "augment"
+        _need(
+            0.0 <= self.adm_lambda_low <= self.adm_lambda_high <= 1.0,
+            o,
+            "adm_lambda_low/high",
+            (self.adm_lambda_low, self.adm_lambda_high),
+            "0 <= low <= high <= 1",
+        )
+        _need(self.shift_px >= 0, o, "shift_px", self.shift_px, "an int >= 0")
+        for name in ("brightness", "contrast", "saturation"):
+            _need(0.0 <= getattr(self, name) < 1.0, o, name, getattr(self, name), "in [0, 1)")
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """A training recipe as read from ``recipes/<name>.toml`` (layout in the module docstring)."""
+
+    name: str
+    """Name used on the command line (``--recipe NAME``)."""
+    suites: tuple[str, ...]
+    """Suites whose collections this recipe trains on."""
+    model: ModelRecipe = field(default_factory=ModelRecipe)
+    train: TrainRecipe = field(default_factory=TrainRecipe)
+    augment: AugmentRecipe = field(default_factory=AugmentRecipe)
+    path: Path | None = None
+    """The file it was read from."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (what snapshots and ``train.json`` record); ``path`` left out."""
+        return {
+            "name": self.name,
+            "suites": list(self.suites),
+            "model": config_to_dict(self.model),
+            "train": config_to_dict(self.train),
+            "augment": config_to_dict(self.augment),
+        }
+
+    @property
+    def sha256(self) -> str:
+        """First 16 hex digits of the SHA-256 of :meth:`to_dict`'s canonical JSON."""
+        blob = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":")).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+    def with_schedule(self, max_steps: int | None, snapshot_every: int | None) -> Recipe:
+        """The recipe with ``--steps`` / ``--snapshot-every`` applied."""
+        from dataclasses import replace
+
+        train = self.train
+        if max_steps is not None:
+            train = replace(train, max_steps=max_steps)
+        if snapshot_every is not None:
+            train = replace(train, snapshot_every_steps=snapshot_every)
+        return replace(self, train=train)
+
+
+def available_recipes(recipes_dir: Path = RECIPES_DIR) -> list[str]:
+    """Recipe names found in ``recipes_dir``."""
+    return sorted(p.stem for p in recipes_dir.glob("*.toml"))
+
+
+def load_recipe(name_or_path: str, recipes_dir: Path = RECIPES_DIR) -> Recipe:
+    """Read recipe ``name`` from ``recipes_dir``, or a ``.toml`` file given by path."""
+    candidate = Path(name_or_path)
+    if candidate.suffix == ".toml":
+        path = candidate
+        if not path.is_file():
+            raise UsageError(f"recipe file {path} does not exist")
+    else:
+        path = recipes_dir / f"{name_or_path}.toml"
+        if not path.is_file():
+            raise UnknownChoiceError("recipe", name_or_path, available_recipes(recipes_dir))
+    try:
+        raw = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise CorruptFileError(f"recipe {path} is not valid TOML ({exc})") from exc
+    known = {"name", "suites", "model", "train", "augment"}
+    unknown = sorted(set(raw) - known)
+    if unknown:
+        raise UsageError(f"recipe {path} has unknown key(s) {unknown}; valid: {sorted(known)}")
+    if not isinstance(raw.get("name"), str) or not raw.get("suites"):
+        raise UsageError(f"recipe {path} needs a name and a non-empty suites list")
+    return Recipe(
+        name=raw["name"],
+        suites=tuple(str(s) for s in raw["suites"]),
+        model=config_from_dict(ModelRecipe, raw.get("model", {})),
+        train=config_from_dict(TrainRecipe, raw.get("train", {})),
+        augment=config_from_dict(AugmentRecipe, raw.get("augment", {})),
+        path=path,
+    )

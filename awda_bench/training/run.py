@@ -1,0 +1,488 @@
+"""``train``: one Table S3 column, trained from a collected DATA_DIR into CKPT_DIR.
+
+Order of work, so that bad input never touches CKPT_DIR::
+
+    column (method, ablation) + recipe (+ --steps/--snapshot-every) + device      may refuse
+    -> DATA_DIR: a complete collect directory of a suite the recipe names, recorded at the
+       recipe's image size (and depth size for +depth); --hold-out a family it holds
+    -> datasets (training selection; validation: the held-out family, or --val-data's pairs),
+       first and last samples read (a damaged file is found now)
+    -> CKPT_DIR: new/empty, or one whose train.json names the same column, recipe, data and
+       hold-out (then training resumes from its latest snapshot)
+    -> train.json, then the loop (models/train.py): snapshots every N steps, each recording
+       the column, recipe and dataset fingerprint; metrics.csv, TensorBoard scalars,
+       learning_curve.png (training/logbook.py)
+
+CKPT_DIR layout::
+
+    snapshot-000000250.pt ...   the snapshots (the ``awda`` evaluation method reads these)
+    train.json                  what this directory trains (checked on every resume)
+    metrics.csv, tensorboard/, learning_curve.png
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch.utils.data import default_collate
+
+from awda_bench.data.datasets import AwdaPairDataset, CollectedData, Selection, TosviDataset
+from awda_bench.errors import ProtocolMismatchError, UnknownChoiceError, UsageError
+from awda_bench.models.architectures import build_model
+from awda_bench.models.awda_net import AwdaNet
+from awda_bench.models.config import AwdaConfig, TosviConfig, TrainConfig, TrunkConfig
+from awda_bench.models.tosvi_net import TosviNet
+from awda_bench.models.train import SampleDataset, TrainResult, resolve_device, train
+from awda_bench.training.augment import BatchTreatment
+from awda_bench.training.columns import Column, column_for
+from awda_bench.training.logbook import Logbook, plot_learning_curve
+from awda_bench.training.recipe import Recipe, load_recipe
+
+TRAIN_JSON = "train.json"
+"""What a checkpoint directory trains (column, recipe, data, hold-out)."""
+
+_SCHEDULE_KEYS = ("max_steps", "snapshot_every_steps")
+"""Recipe fields a resumed run may change (train longer, snapshot more or less often)."""
+
+
+@dataclass(frozen=True)
+class TrainRequest:
+    """Everything ``python -m awda_bench train`` decides."""
+
+    method: str
+    """``awda``, ``tosvi`` or ``tosvi-depth``."""
+    ablation: str | None
+    """An ablation of ``awda`` (:data:`awda_bench.training.columns.ABLATIONS`) or ``None``."""
+    data: Path
+    """DATA_DIR: a ``collect`` directory (train split)."""
+    out: Path
+    """CKPT_DIR: snapshots and logs."""
+    recipe: str = "small"
+    """Recipe name (``recipes/<name>.toml``) or a path to a recipe file."""
+    steps: int | None = None
+    """Overrides the recipe's ``max_steps``."""
+    snapshot_every: int | None = None
+    """Overrides the recipe's ``snapshot_every_steps``."""
+    device: str = "auto"
+    """``auto``, ``cpu`` or ``cuda``."""
+    hold_out: str | None = None
+    """A task family left out of training; its pairs are the validation set (MOSAIC)."""
+    val_data: Path | None = None
+    """A collection (e.g. ``--split test``) whose pairs are the validation set."""
+    threads: int | None = None
+    """``torch.set_num_threads`` (``None``: torch's default)."""
+    progress: bool = True
+    """Show a progress bar with ETA on stderr."""
+
+    def __post_init__(self) -> None:
+        if self.steps is not None and self.steps < 1:
+            raise UsageError(f"--steps must be >= 1, got {self.steps}")
+        if self.snapshot_every is not None and self.snapshot_every < 1:
+            raise UsageError(f"--snapshot-every must be >= 1, got {self.snapshot_every}")
+        if self.threads is not None and self.threads < 1:
+            raise UsageError(f"--threads must be >= 1, got {self.threads}")
+        if self.hold_out is not None and self.val_data is not None:
+            raise UsageError(
+                "give either --hold-out (validate on the held-out family) or --val-data, not both"
+            )
+
+
+@dataclass
+class TrainOutcome:
+    """What :func:`run_training` did."""
+
+    column: Column
+    recipe: Recipe
+    result: TrainResult
+    out: Path
+    validation: list[tuple[int, float]] = field(default_factory=list)
+    """``(step, loss)`` of every validation this call ran."""
+    step_s: list[float] = field(default_factory=list)
+    """Wall time of each step this call took [s] (data + compute)."""
+    data_s: list[float] = field(default_factory=list)
+    """Of which reading and treating the batch [s]."""
+    curve: Path | None = None
+
+
+# ----------------------------------------------------------------------------- checks
+def open_data(path: Path, recipe: Recipe, column: Column, what: str) -> CollectedData:
+    """A complete collection that ``recipe`` can train ``column`` on, or a one-line refusal."""
+    if not path.is_dir():
+        raise UsageError(f"{what} {path} does not exist or is not a directory")
+    data = CollectedData(path)
+    definition = data.manifest.get("definition", {})
+    suite = definition.get("suite")
+    if suite not in recipe.suites:
+        raise UsageError(
+            f"{what} {path} holds a {suite!r} collection; recipe {recipe.name!r} trains on "
+            f"{', '.join(recipe.suites)}"
+        )
+    m = recipe.model
+    size = tuple(definition.get("image_size", ()))
+    if size != (m.image_height_px, m.image_width_px):
+        raise UsageError(
+            f"{what} {path} was recorded at {'x'.join(map(str, size))} but recipe "
+            f"{recipe.name!r} trains at {m.image_height_px}x{m.image_width_px}; collect with "
+            f"--image-size {m.image_height_px}x{m.image_width_px} or pick the matching recipe"
+        )
+    depth = tuple(definition.get("depth_size", ()))
+    if column.arch == "tosvi-depth" and depth != (m.depth_height_px, m.depth_width_px):
+        raise UsageError(
+            f"{what} {path} has {'x'.join(map(str, depth))} wrist depth but recipe "
+            f"{recipe.name!r} needs {m.depth_height_px}x{m.depth_width_px}"
+        )
+    if not data.episodes:
+        raise UsageError(f"{what} {path} holds no finished episodes")
+    return data
+
+
+def check_hold_out(data: CollectedData, family: str) -> None:
+    families = sorted({e.family for e in data.episodes})
+    if family not in families:
+        raise UnknownChoiceError("--hold-out family", family, families)
+    if len(families) < 2:
+        raise UsageError(
+            f"--hold-out {family}: {data.root} holds no other family to train on; "
+            "hold out a family of a multi-family (mosaic) collection"
+        )
+
+
+def identity(record: dict[str, Any]) -> dict[str, Any]:
+    """The part of a ``train.json`` record that must match to resume (schedule excluded)."""
+    recipe = json.loads(json.dumps(record["recipe"]))
+    for key in _SCHEDULE_KEYS:
+        recipe["train"].pop(key, None)
+    return {
+        "column": record["column"],
+        "recipe": recipe,
+        "data_fingerprint": record["data"]["fingerprint"],
+        "hold_out": record["hold_out"],
+        "validation_fingerprint": (record.get("validation") or {}).get("fingerprint"),
+    }
+
+
+def check_checkpoint_dir(out: Path, record: dict[str, Any]) -> bool:
+    """True when ``out`` holds a run of the same identity (resume); refuses anything else."""
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out} is a file, not a directory")
+    if not out.is_dir() or not any(out.iterdir()):
+        return False
+    meta = out / TRAIN_JSON
+    if not meta.is_file():
+        raise UsageError(
+            f"--out {out} is not empty and holds no {TRAIN_JSON}: not a train directory; "
+            "choose an empty or new directory"
+        )
+    try:
+        theirs = identity(json.loads(meta.read_text()))
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise UsageError(f"{meta} is unreadable ({exc}); choose a new --out") from exc
+    ours = identity(record)
+    if theirs != ours:
+        differ = [k for k in ours if ours[k] != theirs[k]]
+        detail = []
+        if "column" in differ:
+            detail.append(f"it trains {theirs['column']['slug']}, not {ours['column']['slug']}")
+        if "recipe" in differ:
+            detail.append(f"recipe {theirs['recipe']['name']!r}, not {ours['recipe']['name']!r}")
+        if "data_fingerprint" in differ:
+            detail.append("other data")
+        if "hold_out" in differ:
+            detail.append(f"hold-out {theirs['hold_out']!r}")
+        if "validation_fingerprint" in differ:
+            detail.append("other validation data")
+        raise ProtocolMismatchError(
+            f"--out {out} holds another training run ({'; '.join(detail)}); repeat its options "
+            "to resume it, or train into a new --out"
+        )
+    return True
+
+
+# ----------------------------------------------------------------------------- pieces
+def model_config(recipe: Recipe, column: Column) -> AwdaConfig | TosviConfig:
+    m = recipe.model
+    trunk = TrunkConfig(
+        image_height_px=m.image_height_px,
+        image_width_px=m.image_width_px,
+        demo_frames=m.demo_frames,
+        backbone_weights=m.backbone_weights,
+        attention_layers=m.attention_layers,
+        attention_heads=m.attention_heads,
+        attention_head_dim=m.attention_head_dim,
+        dropout=m.dropout,
+        hidden_dim=m.hidden_dim,
+        feature_dim=m.feature_dim,
+    )
+    if column.arch == "awda":
+        return AwdaConfig(
+            trunk=trunk,
+            num_heads=column.num_heads,
+            points_per_segment=m.points_per_segment,
+            gamma=m.gamma,
+            attribute_scale=m.attribute_scale,
+        )
+    return TosviConfig(
+        trunk=trunk,
+        frame_stack=m.frame_stack,
+        mixture_components=m.mixture_components,
+        use_depth=column.arch == "tosvi-depth",
+        depth_height_px=m.depth_height_px,
+        depth_width_px=m.depth_width_px,
+    )
+
+
+def make_dataset(
+    data: CollectedData,
+    recipe: Recipe,
+    column: Column,
+    selection: Selection | None,
+    *,
+    synthesized: bool,
+    validation: bool = False,
+) -> AwdaPairDataset | TosviDataset:
+    m = recipe.model
+    if column.arch == "awda":
+        return AwdaPairDataset(
+            data,
+            demo_frames=m.demo_frames,
+            trajectory_points=m.trajectory_points,
+            selection=selection,
+            include_synthesized=synthesized,
+            allow_test=validation,
+        )
+    return TosviDataset(
+        data,
+        demo_frames=m.demo_frames,
+        frame_stack=m.frame_stack,
+        with_depth=column.arch == "tosvi-depth",
+        selection=selection,
+        include_synthesized=synthesized,
+        allow_test=validation,
+    )
+
+
+class OneHead:
+    """An AWDA dataset seen by a one-head network: every sample's ``head`` is 0 (synthesized
+    samples included: ``single-head`` trains them on the task head)."""
+
+    def __init__(self, dataset: SampleDataset) -> None:
+        self.dataset = dataset
+
+    def __len__(self) -> int:
+        return len(self.dataset)
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        sample = dict(self.dataset[index])
+        sample["head"] = torch.zeros_like(sample["head"])
+        return sample
+
+
+class Validator:
+    """Mean loss over a fixed subset of held-out pairs, in eval mode (no dropout, BN running
+    statistics, no augmentation), without touching any random generator."""
+
+    def __init__(self, dataset: SampleDataset, batch_size: int, batches: int, seed: int) -> None:
+        g = torch.Generator().manual_seed(seed + 7)
+        order = torch.randperm(len(dataset), generator=g).tolist()
+        chosen = order[: batch_size * batches]
+        self.batches = [chosen[i : i + batch_size] for i in range(0, len(chosen), batch_size)]
+        self.dataset = dataset
+        self.samples = len(chosen)
+
+    @torch.no_grad()
+    def __call__(self, model: AwdaNet | TosviNet, device: torch.device) -> float:
+        was_training = model.training
+        model.eval()
+        total, count = 0.0, 0
+        try:
+            for indices in self.batches:
+                batch = default_collate([self.dataset[i] for i in indices])
+                batch = {k: v.to(device) for k, v in batch.items()}
+                _, info = model.compute_loss(batch)
+                total += info["loss"] * len(indices)
+                count += len(indices)
+        finally:
+            model.train(was_training)
+        return total / count
+
+
+def _write_json(path: Path, payload: dict[str, Any]) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(json.dumps(payload, indent=2) + "\n")
+    os.replace(tmp, path)
+
+
+# ----------------------------------------------------------------------------- the run
+def run_training(request: TrainRequest) -> TrainOutcome:
+    """Train one column (module docstring); returns what was done."""
+    column = column_for(request.method, request.ablation)
+    recipe = load_recipe(request.recipe).with_schedule(request.steps, request.snapshot_every)
+    device = resolve_device(request.device)
+    data = open_data(request.data, recipe, column, "--data")
+    if data.split != "train":
+        raise UsageError(
+            f"--data {request.data} is a {data.split!r}-split collection; train on a train split "
+            "(a test split is validation data: --val-data)"
+        )
+    selection: Selection | None = None
+    val_data: CollectedData | None = None
+    val_selection: Selection | None = None
+    if request.hold_out is not None:
+        check_hold_out(data, request.hold_out)
+        selection = Selection(exclude_families=(request.hold_out,))
+        val_data, val_selection = data, Selection(families=(request.hold_out,))
+    elif request.val_data is not None:
+        val_data = open_data(request.val_data, recipe, column, "--val-data")
+        if val_data.manifest["definition"].get("suite") != data.manifest["definition"].get("suite"):
+            raise UsageError(
+                f"--val-data {request.val_data} is from another suite than --data {request.data}"
+            )
+    dataset = make_dataset(data, recipe, column, selection, synthesized=column.synthesized)
+    val_dataset = (
+        make_dataset(val_data, recipe, column, val_selection, synthesized=False, validation=True)
+        if val_data is not None
+        else None
+    )
+    train_set: SampleDataset = dataset
+    if column.arch == "awda" and column.num_heads == 1:
+        train_set = OneHead(dataset)
+    for ds in (dataset, val_dataset):  # read the ends now: a damaged file is refused up front
+        if ds is not None:
+            ds[0]
+            ds[len(ds) - 1]
+
+    record: dict[str, Any] = {
+        "column": {
+            "name": column.name,
+            "slug": column.slug,
+            "method": column.method,
+            "ablation": column.ablation,
+            "arch": column.arch,
+            "num_heads": column.num_heads,
+            "adm": column.adm,
+            "synthesized": column.synthesized,
+        },
+        "recipe": recipe.to_dict(),
+        "recipe_sha256": recipe.sha256,
+        "data": {
+            "path": str(request.data),
+            "fingerprint": data.fingerprint,
+            "suite": data.manifest["definition"].get("suite"),
+            "split": data.split,
+            "image_size": data.manifest["definition"].get("image_size"),
+            "samples": len(dataset),
+        },
+        "hold_out": request.hold_out,
+        "validation": None
+        if val_data is None or val_dataset is None
+        else {
+            "source": "hold-out family" if request.hold_out else "--val-data",
+            "path": str(val_data.root),
+            "fingerprint": val_data.fingerprint,
+            "samples": len(val_dataset),
+        },
+    }
+    resuming = check_checkpoint_dir(request.out, record)
+    request.out.mkdir(parents=True, exist_ok=True)
+    _write_json(request.out / TRAIN_JSON, {**record, "device": device.type})
+
+    if request.threads is not None:
+        torch.set_num_threads(request.threads)
+    t = recipe.train
+    torch.manual_seed(t.seed)  # initial weights (a resumed run loads them from its snapshot)
+    model = build_model(model_config(recipe, column))
+    config = TrainConfig(
+        learning_rate=t.learning_rate,
+        batch_size=t.batch_size,
+        max_steps=t.max_steps,
+        snapshot_every_steps=t.snapshot_every_steps,
+        seed=t.seed,
+        device=request.device,
+        resume=resuming,
+    )
+    validator = (
+        Validator(
+            OneHead(val_dataset) if train_set is not dataset else val_dataset,
+            t.batch_size,
+            t.validation_batches,
+            t.seed,
+        )
+        if val_dataset is not None
+        else None
+    )
+    outcome = TrainOutcome(column=column, recipe=recipe, result=TrainResult(0, 0), out=request.out)
+    title = f"{column.name} ({column.slug}), recipe {recipe.name}, data {data.fingerprint}" + (
+        f", hold-out {request.hold_out}" if request.hold_out else ""
+    )
+    state: dict[str, Any] = {}
+
+    def validate(step: int) -> None:
+        if validator is None or state.get("validated") == step:
+            return
+        loss = validator(model, device)
+        state["validated"] = step
+        outcome.validation.append((step, loss))
+        state["log"].log(step, "val", {"loss": loss})
+        state["bar"].set_postfix(loss=f"{state.get('loss', float('nan')):.4g}", val=f"{loss:.4g}")
+
+    def on_start(start: int) -> None:
+        from tqdm import tqdm
+
+        state["log"] = Logbook(request.out, start)
+        state["bar"] = tqdm(
+            total=t.max_steps,
+            initial=start,
+            disable=not request.progress,
+            unit="step",
+            desc=f"train {column.slug}",
+            dynamic_ncols=True,
+        )
+        if start == 0:
+            validate(0)
+
+    def on_step(step: int, info: dict[str, float]) -> None:
+        data_s, compute_s = info.pop("data_s"), info.pop("compute_s")
+        outcome.step_s.append(data_s + compute_s)
+        outcome.data_s.append(data_s)
+        state["loss"] = info["loss"]
+        log: Logbook = state["log"]
+        log.log(step, "train", info)
+        log.log(step, "time", {"data_s": data_s, "compute_s": compute_s})
+        if step % t.validate_every_steps == 0:
+            validate(step)
+        state["bar"].update(1)
+        if "validated" not in state or state["validated"] != step:
+            state["bar"].set_postfix(loss=f"{info['loss']:.4g}", refresh=False)
+
+    def on_snapshot(step: int, path: Path) -> None:
+        validate(step)
+        state["log"].flush()
+        outcome.curve = plot_learning_curve(request.out, title)
+
+    try:
+        outcome.result = train(
+            model,
+            train_set,
+            config,
+            request.out,
+            on_step=on_step,
+            on_start=on_start,
+            on_snapshot=on_snapshot,
+            transform=BatchTreatment(recipe.augment, adm=column.adm, seed=t.seed),
+            training_record=record,
+        )
+    finally:
+        if "log" in state:
+            state["log"].close()
+            state["bar"].close()
+        data.close()
+        if val_data is not None and val_data is not data:
+            val_data.close()
+    if outcome.result.end_step > outcome.result.start_step:
+        outcome.curve = plot_learning_curve(request.out, title)
+    return outcome

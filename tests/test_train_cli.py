@@ -1,0 +1,296 @@
+"""``train``: every Table S3 column from a tiny collection, resume, logs, and bad input.
+
+The tiny collection is ``test_collect``'s (pick_place task 0, 2 episodes per embodiment + 1
+synthesized, 64x80 frames; recorded once per session). Training uses a tiny recipe written
+here (1 attention layer, narrow MLPs, batch 2): a step costs well under a second on one core.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from test_collect import tiny_collection_dir
+
+from awda_bench.cli import main
+from awda_bench.errors import UnknownChoiceError, UsageError
+from awda_bench.models.snapshot import list_snapshots, load_snapshot
+from awda_bench.training.augment import BatchTreatment, step_generator
+from awda_bench.training.columns import ABLATIONS, COLUMNS, column_for
+from awda_bench.training.logbook import read_metrics
+from awda_bench.training.recipe import AugmentRecipe, load_recipe
+
+TINY_RECIPE = """
+name = "tiny"
+suites = ["pick_place", "mosaic"]
+[model]
+image_height_px = {h}
+image_width_px = 80
+attention_layers = 1
+attention_heads = 2
+attention_head_dim = 16
+hidden_dim = 32
+feature_dim = 32
+frame_stack = 3
+[train]
+batch_size = 2
+max_steps = 20
+snapshot_every_steps = 10
+validate_every_steps = 5
+validation_batches = 1
+[augment]
+shift_px = 2
+"""
+
+
+def write_recipe(directory: Path, height: int = 64, name: str = "tiny.toml") -> Path:
+    path = directory / name
+    path.write_text(TINY_RECIPE.format(h=height))
+    return path
+
+
+# ----------------------------------------------------------------------------- fast
+def test_every_column_is_one_method_ablation_pair() -> None:
+    pairs = {(c.method, c.ablation) for c in COLUMNS}
+    assert len(pairs) == len(COLUMNS) == 8
+    assert {a for _, a in pairs} - {None} == set(ABLATIONS)
+    full = column_for("awda", None)
+    assert (full.name, full.num_heads, full.adm, full.synthesized) == ("Full-1", 2, True, True)
+    assert column_for("awda", "no-waypoints").arch == "tosvi"
+    only = column_for("awda", "only-waypoints")
+    assert not only.adm and not only.synthesized and only.arch == "awda"
+    assert column_for("tosvi-depth", None).arch == "tosvi-depth"
+    with pytest.raises(UsageError, match="ablation of awda"):
+        column_for("tosvi", "no-adm")
+    with pytest.raises(UnknownChoiceError, match="awda, tosvi, tosvi-depth"):
+        column_for("daml", None)
+
+
+def test_paper_recipe_is_table_s2_and_recipes_refuse_unknown_fields(tmp_path: Path) -> None:
+    paper = load_recipe("paper")
+    m, t = paper.model, paper.train
+    assert (m.image_height_px, m.image_width_px, m.demo_frames) == (240, 320, 10)
+    assert (m.attention_layers, m.attention_heads, m.hidden_dim, m.gamma) == (2, 4, 256, 1e-3)
+    assert (t.batch_size, t.learning_rate, t.snapshot_every_steps) == (30, 5e-4, 10_000)
+    small = load_recipe("small")
+    assert small.train.max_steps == 10 * small.train.snapshot_every_steps
+    assert small.sha256 != paper.sha256
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "bad"\nsuites = ["pick_place"]\n[train]\nbatchsize = 3\n')
+    with pytest.raises(UsageError, match="batchsize"):
+        load_recipe(str(bad))
+    with pytest.raises(UnknownChoiceError, match="paper"):
+        load_recipe("huge")
+
+
+def test_adm_blends_with_the_partners_first_frame_and_never_touches_labels() -> None:
+    g = torch.Generator().manual_seed(0)
+    batch = {
+        "demo": torch.rand(3, 4, 3, 8, 8, generator=g),
+        "first_frame": torch.rand(3, 3, 8, 8, generator=g),
+        "trajectory": torch.rand(3, 5, 4, generator=g),
+        "head": torch.tensor([0, 1, 0]),
+    }
+    plain = AugmentRecipe(shift_px=0, brightness=0.0, contrast=0.0, saturation=0.0)
+    treat = BatchTreatment(plain, adm=True, seed=3)
+    out = treat(batch, step=7)
+    lam = 0.3 + 0.7 * torch.rand(3, generator=step_generator(3, 7))  # the only draw
+    assert torch.all((lam >= 0.3) & (lam <= 1.0))
+    for i in range(3):
+        p = (i + 1) % 3
+        expected_agent = lam[i] * batch["first_frame"][i] + (1 - lam[i]) * batch["first_frame"][p]
+        expected_demo = lam[i] * batch["demo"][i] + (1 - lam[i]) * batch["demo"][p, 0]
+        assert torch.allclose(out["first_frame"][i], expected_agent, atol=1e-6)
+        assert torch.allclose(out["demo"][i], expected_demo, atol=1e-6)
+    assert out["trajectory"] is batch["trajectory"] and out["head"] is batch["head"]
+    assert torch.equal(treat(batch, 7)["demo"], out["demo"])  # a function of (seed, step)
+    assert not torch.equal(treat(batch, 8)["demo"], out["demo"])
+    off = BatchTreatment(plain, adm=False, seed=3)(batch, 7)
+    assert torch.equal(off["demo"], batch["demo"])
+    # shifts and jitter keep images in [0, 1] and shapes; T-OSVI stacks are treated alike
+    stack = {
+        "demo": batch["demo"],
+        "frames": torch.rand(3, 6, 3, 8, 8),
+        "actions": torch.zeros(3, 6, 4),
+    }
+    full = BatchTreatment(AugmentRecipe(shift_px=2), adm=True, seed=0)(stack, 0)
+    assert full["frames"].shape == (3, 6, 3, 8, 8) and torch.equal(
+        full["actions"], stack["actions"]
+    )
+    assert 0.0 <= float(full["frames"].min()) and float(full["frames"].max()) <= 1.0
+
+
+# ----------------------------------------------------------------------------- tiny collection
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tiny_collection_dir(tmp_path_factory)
+
+
+@pytest.fixture(scope="module")
+def recipe(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return write_recipe(tmp_path_factory.mktemp("recipes"))
+
+
+def _train(*args: str) -> int:
+    return main(["train", *args, "--no-progress", "--threads", "1"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("column", COLUMNS, ids=[c.slug for c in COLUMNS])
+def test_every_column_trains_20_steps_into_loadable_snapshots(
+    column, tiny: Path, recipe: Path, tmp_path: Path
+) -> None:
+    from awda_bench.data.datasets import CollectedData
+
+    out = tmp_path / "ckpt"
+    args = ["--method", column.method, "--data", str(tiny), "--out", str(out)]
+    if column.ablation:
+        args += ["--ablation", column.ablation]
+    assert _train(*args, "--recipe", str(recipe)) == 0
+    snapshots = list_snapshots(out)
+    assert [p.name for p in snapshots] == ["snapshot-000000010.pt", "snapshot-000000020.pt"]
+    snap = load_snapshot(snapshots[-1])
+    assert snap.arch == column.arch and snap.step == 20
+    assert snap.training is not None
+    data = CollectedData(tiny)
+    assert snap.training["data"]["fingerprint"] == data.fingerprint != ""
+    assert snap.training["column"]["name"] == column.name
+    assert snap.training["recipe"]["name"] == "tiny"
+    losses = read_metrics(out / "metrics.csv")[("train", "loss")][1]
+    assert len(losses) == 20 and all(np.isfinite(losses))
+    assert (out / "learning_curve.png").stat().st_size > 0
+    assert any((out / "tensorboard").iterdir())
+    if column.arch == "awda":
+        from awda_bench.policies.awda_policy import AWDAPolicy
+
+        policy = AWDAPolicy(snapshots[-1])  # what the `awda` evaluation method loads
+        assert policy.model.config.num_heads == column.num_heads
+        agent = data.select("agent")[0]
+        demo = data.select("demonstrator")[0]
+        frames = data.frames(demo, np.linspace(0, demo.steps, 10).round().astype(int))
+        waypoints = policy.model.predict_waypoints(frames, data.frames(agent, [0])[0])
+        assert waypoints.shape == (5, 4) and np.all(np.isfinite(waypoints))
+    else:
+        from awda_bench.models.tosvi_net import TosviNet
+
+        model = snap.build_model()
+        assert isinstance(model, TosviNet) and model.arch == column.arch
+    data.close()
+
+
+@pytest.mark.slow
+def test_resume_after_a_kill_continues_the_identical_curve(
+    tiny: Path, recipe: Path, tmp_path: Path
+) -> None:
+    common = ["--method", "awda", "--data", str(tiny), "--recipe", str(recipe), "--steps", "6"]
+    assert _train(*common, "--snapshot-every", "2", "--out", str(tmp_path / "full")) == 0
+    part = tmp_path / "part"
+    assert _train(*common, "--snapshot-every", "2", "--out", str(part)) == 0
+    # as if killed after step 5: snapshot 6 never written, metrics past step 4 left behind
+    (part / "snapshot-000000006.pt").unlink()
+    assert _train(*common, "--snapshot-every", "2", "--out", str(part)) == 0
+    full = read_metrics(tmp_path / "full" / "metrics.csv")
+    resumed = read_metrics(part / "metrics.csv")
+    assert resumed[("train", "loss")] == full[("train", "loss")]  # same steps, same values
+    assert resumed[("train", "loss")][0] == [1, 2, 3, 4, 5, 6]
+    assert len(set(full[("train", "loss")][1])) == 6
+
+
+@pytest.mark.slow
+def test_validation_on_a_held_out_family_and_on_val_data(
+    tiny: Path, recipe: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # a two-family collection: the tiny files listed a second time as family "door", task 99
+    two = tmp_path / "two_families"
+    shutil.copytree(tiny, two)
+    manifest = json.loads((two / "manifest.json").read_text())
+    manifest["units"] += [
+        {**u, "family": "door", "task": 99} for u in manifest["units"] if u["role"] != "synthesized"
+    ]
+    (two / "manifest.json").write_text(json.dumps(manifest))
+    out = tmp_path / "held_out"
+    common = ["--method", "awda", "--recipe", str(recipe), "--steps", "10"]
+    assert _train(*common, "--data", str(two), "--out", str(out), "--hold-out", "door") == 0
+    val = read_metrics(out / "metrics.csv")[("val", "loss")]
+    assert val[0] == [0, 5, 10] and all(np.isfinite(val[1]))
+    record = json.loads((out / "train.json").read_text())
+    assert record["hold_out"] == "door" and record["validation"]["source"] == "hold-out family"
+    assert record["data"]["samples"] == 5  # the pick_place pairs only: door is held out
+    assert "validation loss" in capsys.readouterr().out
+
+    test_split = tmp_path / "test_split"
+    shutil.copytree(tiny, test_split)
+    manifest = json.loads((test_split / "manifest.json").read_text())
+    manifest["definition"]["split"] = "test"
+    (test_split / "manifest.json").write_text(json.dumps(manifest))
+    out2 = tmp_path / "val_data"
+    args = [*common, "--data", str(tiny), "--out", str(out2), "--val-data", str(test_split)]
+    assert _train(*args) == 0
+    assert read_metrics(out2 / "metrics.csv")[("val", "loss")][0] == [0, 5, 10]
+    assert _train(*common, "--data", str(test_split), "--out", str(tmp_path / "x")) == 2
+    assert "test'-split collection" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_bad_input_is_one_line_and_leaves_snapshots_untouched(
+    tiny: Path, recipe: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = tmp_path / "ckpt"
+    base = ["--method", "awda", "--data", str(tiny), "--out", str(out), "--recipe", str(recipe)]
+    assert _train(*base, "--steps", "2", "--snapshot-every", "1") == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    capsys.readouterr()
+
+    other_size = write_recipe(tmp_path, height=96, name="tiny96.toml")
+    mosaic_only = tmp_path / "mosaic_only.toml"
+    mosaic_only.write_text(recipe.read_text().replace('["pick_place", "mosaic"]', '["mosaic"]'))
+    corrupt = tmp_path / "corrupt"
+    shutil.copytree(tiny, corrupt)
+    h5 = corrupt / "agent/pick_place/task_00.h5"
+    h5.write_bytes(h5.read_bytes()[:5000])
+    broken_manifest = tmp_path / "broken_manifest"
+    shutil.copytree(tiny, broken_manifest)
+    (broken_manifest / "manifest.json").write_text("{not json")
+    cases = {
+        "recorded at 64x80": [*base[:6], "--recipe", str(other_size)],
+        "'pick_place' collection": [*base[:6], "--recipe", str(mosaic_only)],
+        "does not exist": ["--method", "awda", "--data", str(tmp_path / "none"), *base[4:]],
+        "task_00.h5 is unreadable": ["--method", "awda", "--data", str(corrupt), *base[4:]],
+        "manifest.json is unreadable": [
+            "--method",
+            "awda",
+            "--data",
+            str(broken_manifest),
+            *base[4:],
+        ],
+        "unknown --hold-out family 'drawer'": [*base, "--hold-out", "drawer"],
+        "holds another training run (it trains awda, not awda+no-adm": [
+            *base,
+            "--ablation",
+            "no-adm",
+        ],
+        "recipe 'tiny', not 'tiny96'": [
+            *base[:6],
+            "--recipe",
+            str(other_size.with_name("tiny96b.toml")),
+        ],
+        "unknown method 'daml'": ["--method", "daml", *base[2:]],
+        "unknown device 'tpu'": [*base, "--device", "tpu"],
+    }
+    # another recipe of the right size: same data, same column, other name and trunk
+    (tmp_path / "tiny96b.toml").write_text(
+        recipe.read_text().replace('name = "tiny"', 'name = "tiny96"').replace("= 32", "= 48")
+    )
+    if not torch.cuda.is_available():
+        cases["torch sees no CUDA device"] = [*base, "--device", "cuda"]
+    for needle, args in cases.items():
+        code = _train(*args)
+        err = capsys.readouterr().err.strip()
+        assert code != 0, needle
+        assert needle in err and len(err.splitlines()) == 1, (needle, err)
+    after = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
+    assert after == before
