@@ -124,6 +124,23 @@ def test_adm_blends_with_the_partners_first_frame_and_never_touches_labels() -> 
     assert 0.0 <= float(full["frames"].min()) and float(full["frames"].max()) <= 1.0
 
 
+def test_logbook_resumes_at_the_snapshot_step_and_a_fresh_start_keeps_nothing(
+    tmp_path: Path,
+) -> None:
+    from awda_bench.training.logbook import Logbook
+
+    log = Logbook(tmp_path, 0, tensorboard=False)
+    log.log(0, "val", {"loss": 2.0})
+    for step in range(1, 5):
+        log.log(step, "train", {"loss": 1.0 / step})
+    log.close()
+    Logbook(tmp_path, 2, tensorboard=False).close()  # resumed from the snapshot at step 2
+    series = read_metrics(tmp_path / "metrics.csv")
+    assert series[("train", "loss")][0] == [1, 2] and series[("val", "loss")][0] == [0]
+    Logbook(tmp_path, 0, tensorboard=False).close()  # killed before its first snapshot
+    assert read_metrics(tmp_path / "metrics.csv") == {}
+
+
 # ----------------------------------------------------------------------------- tiny collection
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:

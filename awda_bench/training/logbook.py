@@ -10,8 +10,9 @@
     50,val,loss,0.77
 
 Resuming from the snapshot at step ``s`` first drops every row past ``s`` (they belong to steps
-the killed run took after its last snapshot, which are taken again), so the file shows one
-continuous curve. TensorBoard event files are written under ``tensorboard/`` with
+the killed run took after its last snapshot, which are taken again; a run killed before its
+first snapshot starts over from an empty file), so the file shows one continuous curve.
+TensorBoard event files are written under ``tensorboard/`` with
 ``purge_step = s + 1`` for the same reason.
 """
 
@@ -53,8 +54,8 @@ class Logbook:
     def _truncate(self, start_step: int) -> None:
         if not self.path.is_file():
             return
-        with self.path.open(newline="") as f:
-            rows = [r for r in csv.DictReader(f) if int(r["step"]) <= start_step]
+        with self.path.open(newline="") as f:  # a fresh start (step 0) keeps nothing
+            rows = [r for r in csv.DictReader(f) if start_step > 0 and int(r["step"]) <= start_step]
         tmp = self.path.with_name(f".{self.path.name}.tmp")
         with tmp.open("w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=_FIELDS)
