@@ -109,7 +109,7 @@ def test_numpy_path_matches_torch_reference_with_ragged_lengths(gamma: float) ->
     # each ragged row is the soft-DTW of the truncated sequence, and padding gets no gradient
     for i, n in enumerate(lengths.tolist()):
         alone = soft_dtw(x[i : i + 1, :n], y[i : i + 1], gamma, implementation="torch")
-        assert abs(float(alone) - float(results[0][0][i])) <= 1e-9
+        assert abs(float(alone.detach()) - float(results[0][0][i])) <= 1e-9
         assert torch.all(results[1][1][i, n:] == 0)
 
 
