@@ -44,6 +44,10 @@ class IKConfig:
     max_iterations: int = 1
     """QP solves per call at most. One solve leaves ~0.25 mm of a 2 cm step (measured), which the
     closed loop (every control step starts from the measured joints) removes on the next step."""
+    limit_margin_rad: float = 0.2
+    """Joint-limit constraints enter the QP only when a limited joint is within this of a limit
+    [rad]: one control step moves a joint by < 0.05 rad, so farther away they cannot be active,
+    and leaving them out saves ~1/4 of a solve (measured ~40 us of ~150 us)."""
     tolerance_m: float = 1e-5
     """Stop iterating once the TCP is this close to the target in the model [m]."""
     solver: str = "daqp"
@@ -82,6 +86,10 @@ class PandaIK:
         self.posture_task.set_target(REST_QPOS.copy())
         self.tasks = [self.frame_task, self.posture_task]
         self.limits = [mink.ConfigurationLimit(self.model)]
+        arm_joints = [self.model.joint(name).id for name in ARM_JOINTS]
+        self._lower = self.model.jnt_range[arm_joints, 0].copy()
+        self._upper = self.model.jnt_range[arm_joints, 1].copy()
+        self._limited = self.model.jnt_limited[arm_joints].astype(bool)
         self.failures = 0
         """How many solves raised ``mink.NoSolutionFound`` (the previous ``q`` was kept)."""
 
@@ -139,6 +147,14 @@ class PandaIK:
         q_arm, error = self._iterate(target)
         return q_arm, target, error
 
+    def _near_limit(self) -> bool:
+        """Is any limited arm joint within ``limit_margin_rad`` of a limit at the current ``q``?
+        (The fingers sit on their limit, but no task moves them.)"""
+        q = self.configuration.q[self.arm_qpos_index]
+        margin = self.config.limit_margin_rad
+        near = (q - self._lower < margin) | (self._upper - q < margin)
+        return bool((near & self._limited).any())
+
     def _iterate(self, target_pos: np.ndarray) -> tuple[np.ndarray, float]:
         cfg = self.config
         self.frame_task.set_target(
@@ -156,7 +172,7 @@ class PandaIK:
                     dt=cfg.dt_s,
                     solver=cfg.solver,
                     damping=cfg.damping,
-                    limits=self.limits,
+                    limits=self.limits if self._near_limit() else [],
                 )
             except mink.NoSolutionFound:
                 self.failures += 1
