@@ -186,9 +186,23 @@ class PickPlaceEnv(AWDATaskEnv):
 
     def target_distance(self) -> torch.Tensor:
         """(n,) TCP distance to the target object's surface [m]."""
-        pos, quat = self.object_poses()
-        d = distance_to_objects(self.agent.tcp_pose.p, pos, quat, self.objects_spec)
-        return self._select_target(d)
+        pos, quat = self.target_pose()
+        return self._target_surface_distance(self.agent.tcp_pose.p, pos, quat)
+
+    def _target_surface_distance(
+        self, points: torch.Tensor, target_pos: torch.Tensor, target_quat: torch.Tensor
+    ) -> torch.Tensor:
+        """(n,) distance of ``points`` to each env's target object only (not all four: this runs
+        every step, and the three distractors' distances were computed and thrown away)."""
+        idx = self.target_object_index
+        kinds = [int(idx[0])] if self.num_envs == 1 else torch.unique(idx).tolist()
+        out = torch.zeros(self.num_envs, dtype=points.dtype, device=self.device)
+        for j in kinds:
+            d = distance_to_objects(
+                points, target_pos[:, None], target_quat[:, None], (self.objects_spec[j],)
+            )[:, 0]
+            out = d if len(kinds) == 1 else torch.where(idx == j, d, out)
+        return out
 
     def _evaluate_task(self) -> dict[str, torch.Tensor]:
         pos, quat = self.object_poses()
@@ -199,7 +213,7 @@ class PickPlaceEnv(AWDATaskEnv):
         height = target_pos[:, 2] - self.layout.target_bin.floor_z_m
         success = inside_xy & (height >= 0) & (height <= self.layout.success_max_height_m)
         tcp_pos = self.agent.tcp_pose.p
-        distance = self._select_target(distance_to_objects(tcp_pos, pos, quat, self.objects_spec))
+        distance = self._target_surface_distance(tcp_pos, target_pos, self._select_target(quat))
         # the contact-force grasp test costs ~2 ms per step: call is_grasping_target() on demand;
         # tcp_pos and object_raw_poses (n, 4, 7: xyz + wxyz) are reused by _get_obs_extra
         return {
