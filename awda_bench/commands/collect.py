@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -14,15 +13,13 @@ from awda_bench.data.config import (
     CollectConfig,
     parse_image_size,
 )
-from awda_bench.harness.backends import BACKENDS
+from awda_bench.harness.backends import add_backend_args
 from awda_bench.suites import SUITES_DIR
 
 QUICK_EPISODES = 2
 """``--quick``: episodes per task."""
 QUICK_TASKS = 2
 """``--quick``: the first this-many tasks of the split."""
-DEFAULT_WORKERS = max(1, min(os.cpu_count() or 1, 4))
-"""Worker processes when ``--workers`` is not given (as ``run``)."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -47,24 +44,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="successful episodes kept per task and embodiment (default 20; reference 100)",
     )
     parser.add_argument("--out", type=Path, required=True, help="DATA_DIR")
-    parser.add_argument(
-        "--workers",
-        type=int,
-        default=DEFAULT_WORKERS,
-        help=f"worker processes or Ray actors, 0 = in this process (default {DEFAULT_WORKERS})",
-    )
-    parser.add_argument(
-        "--backend",
-        choices=BACKENDS,
-        default=BACKENDS[0],
-        help="where --workers run: local processes, or Ray actors (a private local Ray instance, "
-        "or the cluster at --ray-address; needs the 'ray' extra); default local",
-    )
-    parser.add_argument(
-        "--ray-address",
-        metavar="ADDRESS",
-        help="join this Ray cluster (HOST:6379, 'auto', ray://HOST:10001) with --backend ray",
-    )
+    add_backend_args(parser)
     parser.add_argument(
         "--image-size",
         default="x".join(map(str, DEFAULT_IMAGE_SIZE)),

@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
 from awda_bench.errors import UsageError
-from awda_bench.harness.backends import BACKENDS
+from awda_bench.harness.backends import add_backend_args
 from awda_bench.harness.methods import DEFAULT_METHOD, method_names
 from awda_bench.harness.results_store import STORE_NAME
 from awda_bench.harness.sweep import SweepConfig, run_sweep
@@ -17,9 +16,6 @@ from awda_bench.suites import SUITES_DIR, available_suites
 
 QUICK_EPISODES = 3
 """``--quick``: episodes per evaluation unit (one snapshot)."""
-
-DEFAULT_WORKERS = max(1, min(os.cpu_count() or 1, 4))
-"""Worker processes when ``--workers`` is not given."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -61,24 +57,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument(
         "--seed", type=int, default=0, help="base seed of all episode seeds (default 0)"
     )
-    parser.add_argument(
-        "--workers",
-        type=int,
-        default=DEFAULT_WORKERS,
-        help=f"worker processes (or Ray actors), 0 = in this process (default {DEFAULT_WORKERS})",
-    )
-    parser.add_argument(
-        "--backend",
-        choices=BACKENDS,
-        default=BACKENDS[0],
-        help="where --workers run: local processes, or Ray actors (a private local Ray instance, "
-        "or the cluster at --ray-address; needs the 'ray' extra); default local",
-    )
-    parser.add_argument(
-        "--ray-address",
-        metavar="ADDRESS",
-        help="join this Ray cluster (HOST:6379, 'auto', ray://HOST:10001) with --backend ray",
-    )
+    add_backend_args(parser)
     parser.add_argument(
         "--out", type=Path, default=Path("runs"), help="run directory (default runs/)"
     )

@@ -15,6 +15,8 @@ single store writer, resume, de-duplication, error records and the watchdog mean
 
 from __future__ import annotations
 
+import argparse
+import os
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from typing import Protocol
@@ -26,6 +28,32 @@ from awda_bench.suites import Suite
 
 BACKENDS = ("local", "ray")
 """Valid ``--backend`` values; the first is the default."""
+
+
+DEFAULT_WORKERS = max(1, min(os.cpu_count() or 1, 4))
+"""Worker processes (or Ray actors) when ``--workers`` is not given."""
+
+
+def add_backend_args(parser: argparse.ArgumentParser) -> None:
+    """``--workers``, ``--backend``, ``--ray-address``: the same for every scheduling command."""
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=DEFAULT_WORKERS,
+        help=f"worker processes (or Ray actors), 0 = in this process (default {DEFAULT_WORKERS})",
+    )
+    parser.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default=BACKENDS[0],
+        help="where --workers run: local processes, or Ray actors (a private local Ray instance, "
+        "or the cluster at --ray-address; needs the 'ray' extra); default local",
+    )
+    parser.add_argument(
+        "--ray-address",
+        metavar="ADDRESS",
+        help="join this Ray cluster (HOST:6379, 'auto', ray://HOST:10001) with --backend ray",
+    )
 
 
 class EpisodePool(Protocol):
