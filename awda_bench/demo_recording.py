@@ -13,6 +13,7 @@ policy watches) and by ground-truth waypoint extraction (state only, ``frames=Fa
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
@@ -183,12 +184,34 @@ def demo_video_frames(
     render_every: int = 4,
 ) -> np.ndarray:
     """The demonstrator's video of ``(task, demo_seed)`` subsampled to ``count`` frames
-    ``(count, H, W, 3)`` uint8, first and last included. ``envs`` caches the demo envs."""
+    ``(count, H, W, 3)`` uint8, first and last included. ``envs`` caches the demo envs.
+
+    The last :data:`DEMO_VIDEO_CACHE_SIZE` videos are kept per process: a learned method's
+    snapshots are evaluated on the same episodes, so every snapshot of a worker sees the very same
+    demo (PhysX carries ~1e-3 rad of history from one episode of an env into the next, so a
+    re-recorded demo would differ by a pixel here and there) and the demonstrator runs once
+    per episode instead of once per snapshot.
+    """
+    key = (suite.name, str(suite.path), task, demo_seed, count, render_every)
+    cached = _DEMO_VIDEOS.get(key)
+    if cached is not None:
+        _DEMO_VIDEOS.move_to_end(key)
+        return cached.copy()
     env = demo_env_for(envs, suite, task, "demonstrator")
     frames, _ = record_demo(suite, task, demo_seed, render_every=render_every, env=env)
     assert frames is not None
     index = np.linspace(0, len(frames) - 1, min(count, len(frames))).round().astype(int)
-    return frames[index]
+    video = frames[index]
+    _DEMO_VIDEOS[key] = video
+    while len(_DEMO_VIDEOS) > DEMO_VIDEO_CACHE_SIZE:
+        _DEMO_VIDEOS.popitem(last=False)
+    return video.copy()
+
+
+DEMO_VIDEO_CACHE_SIZE = 64
+"""Demo videos :func:`demo_video_frames` keeps per process (10 frames of 240x320: ~2.3 MB each)."""
+
+_DEMO_VIDEOS: OrderedDict[tuple[object, ...], np.ndarray] = OrderedDict()
 
 
 def save_video(frames: np.ndarray, path: str | Path, fps: float) -> Path:

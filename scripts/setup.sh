@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # One entry point for a fresh machine:
 #
-#   bash scripts/setup.sh quick   # set up, then run the main job on a small default and write reports/
+#   bash scripts/setup.sh quick   # set up, then run the main job on a small default and write reports/quick/ (the committed reports/ stay)
 #   bash scripts/setup.sh test    # set up, then run the test suite (tox)
 #   bash scripts/setup.sh         # set up only
 #

@@ -256,3 +256,47 @@ def test_num_waypoints_selects_the_gt_waypoints_variant(tmp_path: Path, capsys) 
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and "--num-waypoints" in err
     assert not (tmp_path / "runs").exists()
+
+
+def test_labels_keep_checkpoint_dirs_apart_and_split_train_evaluates_training_tasks(
+    tmp_path: Path, suites: Path, learned, capsys
+) -> None:
+    good = write_snapshots(tmp_path / "good", [0.99, 0.99])[0].parent
+    bad = write_snapshots(tmp_path / "bad", [0.0, 0.0])[0].parent
+    out = tmp_path / "runs"
+    common = ("--method", "learned", "--snapshots", "2", "--episodes", "2")
+    assert _run(suites, out, *common, "--checkpoints", str(good), "--label", "good") == 0
+    assert _run(suites, out, *common, "--checkpoints", str(bad), "--label", "bad") == 0
+    assert _run(suites, out, *common, "--checkpoints", str(good), "--label", "good") == 0
+    assert "8 already done, 0 played" in capsys.readouterr().out
+    # a store holds one protocol per suite: the training tasks go to a store of their own
+    fit = (*common, "--checkpoints", str(good), "--label", "fit", "--split", "train")
+    before = _digest(out / STORE_NAME)
+    assert _run(suites, out, *fit) == 2
+    assert "eval_tasks=[2, 3]->[0, 1]" in capsys.readouterr().err
+    assert _digest(out / STORE_NAME) == before
+    assert _run(suites, tmp_path / "fit", *fit) == 0
+    with sqlite3.connect(tmp_path / "fit" / STORE_NAME) as db:
+        fit_rows = db.execute("SELECT method, task FROM episodes").fetchall()
+    assert len(fit_rows) == 8 and {t for _, t in fit_rows} == {0, 1}  # the training tasks
+    assert {m for m, _ in fit_rows} == {"fit"}
+    with sqlite3.connect(out / STORE_NAME) as db:
+        rows = db.execute(
+            "SELECT method, COUNT(*), SUM(success_once), GROUP_CONCAT(DISTINCT task) "
+            "FROM episodes GROUP BY method ORDER BY method"
+        ).fetchall()
+        protocols = db.execute("SELECT COUNT(*) FROM protocols").fetchone()[0]
+    by_label = {m: (n, s, sorted(int(t) for t in tasks.split(","))) for m, n, s, tasks in rows}
+    assert by_label["good"][:2] == (8, 8) and by_label["good"][2] == [2, 3]
+    assert by_label["bad"][:2] == (8, 0)
+    assert protocols == 1
+    assert main(["report", "--runs", str(out), "--out", str(tmp_path / "rep")]) == 0
+    s3 = (tmp_path / "rep" / "s3.md").read_text()
+    assert "good" in s3 and "bad" in s3
+    capsys.readouterr()
+    # a label that is another method's name is refused before anything is written
+    before = _digest(out / STORE_NAME)
+    assert _run(suites, out, *common, "--checkpoints", str(bad), "--label", "scripted") == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "another method's name" in err
+    assert _digest(out / STORE_NAME) == before

@@ -14,4 +14,5 @@ COMMANDS: tuple[str, ...] = (
     "dataset",
     "replay",
     "train",
+    "reproduce",
 )

@@ -8,10 +8,12 @@ from pathlib import Path
 
 from awda_bench.errors import UsageError
 from awda_bench.harness.backends import add_backend_args
+from awda_bench.harness.episode_specs import EVAL_SPLITS
 from awda_bench.harness.methods import DEFAULT_METHOD, method_names
 from awda_bench.harness.results_store import STORE_NAME
 from awda_bench.harness.sweep import SweepConfig, run_sweep
 from awda_bench.harness.worker_pool import DEFAULT_ENV_FACTORY
+from awda_bench.policies.tosvi_policy import ACTION_SELECTS, tosvi_method_name
 from awda_bench.suites import SUITES_DIR, available_suites
 
 QUICK_EPISODES = 3
@@ -45,7 +47,25 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="gt-waypoints only: K waypoints per episode (default 5, the paper's); K = 3 and 8 "
         "are their own methods and table columns, gt-waypoints-k3 and gt-waypoints-k8",
     )
+    parser.add_argument(
+        "--action-select",
+        choices=ACTION_SELECTS,
+        help="tosvi / tosvi-depth only: the action read from the predicted mixture (default "
+        "sample, the reference's; mean and mode are their own methods, e.g. tosvi-mean)",
+    )
     parser.add_argument("--checkpoints", type=Path, help="snapshot directory of a learned method")
+    parser.add_argument(
+        "--label",
+        help="name of this method's rows in the store and tables (default: the method's), e.g. "
+        "no-adm for --method awda on an ablation's checkpoints",
+    )
+    parser.add_argument(
+        "--split",
+        choices=EVAL_SPLITS,
+        default=EVAL_SPLITS[0],
+        help="test: the held-out tasks (the protocol, default); train: the training tasks, to "
+        "tell a low held-out number from a failure to fit",
+    )
     parser.add_argument(
         "--snapshots", type=int, default=10, help="evaluate the last N snapshots (default 10)"
     )
@@ -93,7 +113,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def _method(args: argparse.Namespace) -> str:
-    """``--method`` with ``--num-waypoints`` folded in (gt-waypoints' K variants are methods)."""
+    """``--method`` with ``--num-waypoints`` / ``--action-select`` folded in (gt-waypoints' K
+    variants and T-OSVI's action statistics are methods of their own)."""
+    if args.action_select is not None:
+        if args.method not in ("tosvi", "tosvi-depth"):
+            raise UsageError(
+                f"--action-select applies to --method tosvi or tosvi-depth, not {args.method!r}; "
+                "drop --action-select"
+            )
+        return tosvi_method_name(args.method, args.action_select)
     if args.num_waypoints is None:
         return str(args.method)
     if args.method != "gt-waypoints":
@@ -125,6 +153,8 @@ def config_from_args(args: argparse.Namespace) -> SweepConfig:
         env_factory=args.env_factory,
         progress=not args.no_progress,
         command=" ".join(["python -m awda_bench", *sys.argv[1:]]),
+        label=args.label,
+        split=args.split,
     )
 
 

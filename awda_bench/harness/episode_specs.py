@@ -15,7 +15,7 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass
 
-from awda_bench.errors import UsageError
+from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.policies.base import EpisodeSpec
 from awda_bench.suites import Suite
 
@@ -57,8 +57,18 @@ class EvalProtocol:
         return json.dumps(asdict(self), sort_keys=True)
 
 
-def make_protocol(suite: Suite, *, episodes: int | None, base_seed: int) -> EvalProtocol:
+EVAL_SPLITS: tuple[str, ...] = ("test", "train")
+"""``test``: the suite's held-out tasks (the paper's protocol); ``train``: its training tasks
+(telling a low held-out number apart from a failure to fit). The evaluated tasks are part of the
+fingerprint, so the two never mix in one cell."""
+
+
+def make_protocol(
+    suite: Suite, *, episodes: int | None, base_seed: int, split: str = "test"
+) -> EvalProtocol:
     """The protocol for evaluating ``suite``; ``episodes=None`` takes the suite's default."""
+    if split not in EVAL_SPLITS:
+        raise UnknownChoiceError("--split", split, EVAL_SPLITS)
     n = suite.episodes_per_task if episodes is None else episodes
     if n < 1:
         raise UsageError(f"--episodes must be at least 1 (got {n})")
@@ -73,7 +83,9 @@ def make_protocol(suite: Suite, *, episodes: int | None, base_seed: int) -> Eval
         suite=suite.name,
         suite_sha256=hashlib.sha256(suite.path.read_bytes()).hexdigest(),
         horizon_steps=suite.horizon_steps,
-        eval_tasks=tuple(t.index for t in suite.eval_tasks),
+        eval_tasks=tuple(
+            t.index for t in (suite.eval_tasks if split == "test" else suite.train_tasks)
+        ),
         episodes=n,
         episode_unit=unit,
         base_seed=base_seed,

@@ -184,6 +184,43 @@ for _spec in (
         description="learned: AWDA waypoint network snapshots (--checkpoints DIR) + motor primitives",
     ),
     MethodSpec(
+        "tosvi",
+        "awda_bench.policies.tosvi_policy:tosvi",
+        learned=True,
+        description="learned: T-OSVI closed-loop snapshots (--checkpoints DIR; also the "
+        "no-waypoints ablation), actions sampled from the mixture",
+    ),
+    MethodSpec(
+        "tosvi-mean",
+        "awda_bench.policies.tosvi_policy:tosvi_mean",
+        learned=True,
+        description="tosvi with the mixture mean as the action (--action-select mean)",
+    ),
+    MethodSpec(
+        "tosvi-mode",
+        "awda_bench.policies.tosvi_policy:tosvi_mode",
+        learned=True,
+        description="tosvi with the heaviest component's mean (--action-select mode)",
+    ),
+    MethodSpec(
+        "tosvi-depth",
+        "awda_bench.policies.tosvi_policy:tosvi_depth",
+        learned=True,
+        description="learned: T-OSVI +depth snapshots (wrist depth, late fusion), sampled actions",
+    ),
+    MethodSpec(
+        "tosvi-depth-mean",
+        "awda_bench.policies.tosvi_policy:tosvi_depth_mean",
+        learned=True,
+        description="tosvi-depth with the mixture mean (--action-select mean)",
+    ),
+    MethodSpec(
+        "tosvi-depth-mode",
+        "awda_bench.policies.tosvi_policy:tosvi_depth_mode",
+        learned=True,
+        description="tosvi-depth with the heaviest component's mean (--action-select mode)",
+    ),
+    MethodSpec(
         "random",
         "awda_bench.policies.random_policy:RandomPolicy",
         description="uniform random actions (a floor for every table)",

@@ -13,7 +13,7 @@ import platform
 import sys
 import time
 from contextlib import AbstractContextManager, nullcontext
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from importlib import metadata
 from pathlib import Path
 
@@ -23,7 +23,13 @@ from awda_bench.errors import UsageError
 from awda_bench.harness.backends import BACKENDS, EpisodePool, check_backend, open_pool
 from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
 from awda_bench.harness.episode_specs import EvalProtocol, build_episode_specs, make_protocol
-from awda_bench.harness.methods import MethodSpec, SnapshotRef, get_method, select_snapshots
+from awda_bench.harness.methods import (
+    MethodSpec,
+    SnapshotRef,
+    get_method,
+    method_names,
+    select_snapshots,
+)
 from awda_bench.harness.results_store import ResultsStore
 from awda_bench.harness.worker_pool import (
     DEFAULT_ENV_FACTORY,
@@ -92,6 +98,11 @@ class SweepConfig:
     """Show a progress bar on stderr."""
     command: str = field(default_factory=lambda: " ".join(sys.argv))
     """The command line, recorded in the store."""
+    label: str | None = None
+    """Name of the method's rows in the store and tables (``None``: the method's name); tells
+    apart checkpoint directories evaluated with the same method (Table S3's columns)."""
+    split: str = "test"
+    """``test``: the held-out tasks (the protocol); ``train``: the training tasks (fit check)."""
 
 
 @dataclass(frozen=True)
@@ -136,10 +147,30 @@ class SweepResult:
     """Sum of policy construction times in the workers [s] (not part of episode time)."""
 
 
+def sweep_method(config: SweepConfig) -> MethodSpec:
+    """``config.method``'s spec, named ``config.label`` when one is given."""
+    method = get_method(config.method)
+    if config.label is None or config.label == method.name:
+        return method
+    label = config.label.strip()
+    if not label or any(c in label for c in "\n\t|"):
+        raise UsageError(
+            f"--label {config.label!r}: give a non-empty name without |, tabs or newlines"
+        )
+    if label in method_names():
+        raise UsageError(
+            f"--label {label!r} is another method's name; choose a name of its own "
+            f"(e.g. {config.method}-{label})"
+        )
+    return replace(method, name=label)
+
+
 def prepare_sweep(config: SweepConfig) -> SweepPlan:
     """Validate the whole sweep; raises a one-line error on bad input and writes nothing."""
     suite = load_suite(config.suite, config.suites_dir)
-    protocol = make_protocol(suite, episodes=config.episodes, base_seed=config.seed)
+    protocol = make_protocol(
+        suite, episodes=config.episodes, base_seed=config.seed, split=config.split
+    )
     specs = build_episode_specs(suite, protocol)
     for task in config.tasks:
         if task not in protocol.eval_tasks:
@@ -155,7 +186,7 @@ def prepare_sweep(config: SweepConfig) -> SweepPlan:
     check_backend(config.backend, config.workers, config.ray_address)
     if config.episode_timeout_s <= 0:
         raise UsageError(f"--episode-timeout must be positive (got {config.episode_timeout_s})")
-    method = get_method(config.method)
+    method = sweep_method(config)
     snapshots = tuple(select_snapshots(method, config.checkpoints, config.snapshots))
     jobs = tuple(Job(spec=s, method=method, snapshot=snap) for snap in snapshots for s in specs)
     expected = len(build_episode_specs(suite, protocol))

@@ -134,11 +134,19 @@ class TosviNet(nn.Module):
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Mixture parameters: policy ``(B, A, 3M)`` for a_t, inverse ``(B, S-1, A, 3M)``."""
         self._check_inputs(demo, frames, depth)
+        features = self.trunk.frame_features(torch.cat((demo, frames), dim=1))
+        return self.heads_from_features(features, depth)
+
+    def heads_from_features(
+        self, features: torch.Tensor, depth: torch.Tensor | None = None
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """The part of :meth:`forward` after the per-frame ResNet: ``features`` ``(B, demo_frames +
+        frame_stack, 512, h, w)`` from ``trunk.frame_features`` (each frame's features depend on
+        that frame alone, so a closed-loop policy computes each frame's once and keeps them)."""
         cfg = self.config
-        all_frames = torch.cat((demo, frames), dim=1)
-        features = self.trunk.frame_features(all_frames)
         if cfg.use_depth:
-            assert depth is not None
+            if depth is None:
+                raise UsageError("a T-OSVI +depth model needs the wrist depth stack")
             features = self._fuse_depth(features, depth)
         vectors = self.trunk.temporal(features)[:, -cfg.frame_stack :]  # (B, S, F)
         b, s = vectors.shape[:2]

@@ -124,11 +124,15 @@ def open_data(path: Path, recipe: Recipe, column: Column, what: str) -> Collecte
         )
     m = recipe.model
     size = tuple(definition.get("image_size", ()))
-    if size != (m.image_height_px, m.image_width_px):
+    want = (m.image_height_px, m.image_width_px)
+    # Larger frames are area-downscaled by the dataset exactly as the evaluated policies downscale
+    # the harness camera's frames (rendered at the suite's camera size); a smaller collection would
+    # have to be upscaled, which evaluation never does.
+    if len(size) != 2 or size[0] < want[0] or size[1] < want[1]:
         raise UsageError(
             f"{what} {path} was recorded at {'x'.join(map(str, size))} but recipe "
-            f"{recipe.name!r} trains at {m.image_height_px}x{m.image_width_px}; collect with "
-            f"--image-size {m.image_height_px}x{m.image_width_px} or pick the matching recipe"
+            f"{recipe.name!r} trains at {want[0]}x{want[1]}; collect with --image-size "
+            f"{want[0]}x{want[1]} or larger (the suite's camera size matches evaluation best)"
         )
     depth = tuple(definition.get("depth_size", ()))
     if column.arch == "tosvi-depth" and depth != (m.depth_height_px, m.depth_width_px):
@@ -246,10 +250,12 @@ def make_dataset(
     validation: bool = False,
 ) -> AwdaPairDataset | TosviDataset:
     m = recipe.model
+    size = (m.image_height_px, m.image_width_px)
     if column.arch == "awda":
         return AwdaPairDataset(
             data,
             demo_frames=m.demo_frames,
+            image_size=size,
             trajectory_points=m.trajectory_points,
             selection=selection,
             include_synthesized=synthesized,
@@ -259,6 +265,8 @@ def make_dataset(
         data,
         demo_frames=m.demo_frames,
         frame_stack=m.frame_stack,
+        image_size=size,
+        depth_size=(m.depth_height_px, m.depth_width_px),
         with_depth=column.arch == "tosvi-depth",
         selection=selection,
         include_synthesized=synthesized,

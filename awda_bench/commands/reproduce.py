@@ -1,0 +1,92 @@
+"""``python -m awda_bench reproduce``: collect -> train every requested column -> evaluate -> report."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from awda_bench.reproduce import (
+    COLUMN_KEYS,
+    DEFAULT_COLUMNS,
+    SUITES,
+    ReproduceConfig,
+    format_plan,
+    parse_columns,
+    plan_stages,
+    run_stages,
+    write_summary,
+)
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    parser = subparsers.add_parser(
+        "reproduce",
+        help="from an empty directory to Table S3/S4 rows: collect, train, evaluate, report",
+        description="Collect the suite's training (and validation) data, train every requested "
+        "Table S3 column, evaluate each column's last N snapshots on the held-out tasks and write "
+        "the report, printing the plan with estimated times first. Resumable: re-running the "
+        "same command skips finished collections, training runs and evaluated episodes.",
+    )
+    parser.add_argument("--suite", required=True, help=f"one of {', '.join(SUITES)}")
+    parser.add_argument(
+        "--recipe", default="small", help="training recipe: small, paper or a .toml path"
+    )
+    parser.add_argument(
+        "--columns",
+        default=",".join(DEFAULT_COLUMNS),
+        help=f"comma-separated Table S3 columns among {', '.join(COLUMN_KEYS)} "
+        f"(default {','.join(DEFAULT_COLUMNS)})",
+    )
+    parser.add_argument(
+        "--hold-out", default=None, metavar="FAMILY", help="MOSAIC: the held-out family"
+    )
+    parser.add_argument("--workers", type=int, default=2, help="collect/run workers (default 2)")
+    parser.add_argument(
+        "--episodes-per-task",
+        type=int,
+        default=20,
+        help="training demos per task and embodiment (default 20; the reference used 100)",
+    )
+    parser.add_argument(
+        "--synthesize", type=int, default=200, help="synthesized trajectories (default 200)"
+    )
+    parser.add_argument("--snapshots", type=int, default=10, help="last N snapshots (default 10)")
+    parser.add_argument(
+        "--episodes", type=int, default=None, help="episodes per held-out task (default: suite's)"
+    )
+    parser.add_argument("--steps", type=int, default=None, help="override the recipe's steps")
+    parser.add_argument("--threads", type=int, default=None, help="torch threads for training")
+    parser.add_argument("--no-fit-check", action="store_true", help="skip Full-1 on train tasks")
+    parser.add_argument(
+        "--out", type=Path, default=None, help="directory (default runs/reproduce-SUITE-RECIPE)"
+    )
+    parser.add_argument("--dry-run", action="store_true", help="print the plan and stop")
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    out = args.out or Path("runs") / f"reproduce-{args.suite}-{Path(args.recipe).stem}"
+    config = ReproduceConfig(
+        suite=args.suite,
+        out=out,
+        recipe=args.recipe,
+        columns=parse_columns(args.columns),
+        hold_out=args.hold_out,
+        workers=args.workers,
+        episodes_per_task=args.episodes_per_task,
+        synthesize=args.synthesize,
+        snapshots=args.snapshots,
+        episodes=args.episodes,
+        steps=args.steps,
+        threads=args.threads,
+        fit_check=not args.no_fit_check,
+        dry_run=args.dry_run,
+    )
+    stages = plan_stages(config)
+    print(format_plan(config, stages), flush=True)
+    if config.dry_run:
+        return 0
+    timings = run_stages(config, stages)
+    path = write_summary(config, timings)
+    print(f"[reproduce] done: {path}")
+    return 0

@@ -1,0 +1,226 @@
+"""``tosvi``, ``tosvi-depth``: a learned closed-loop policy (T-OSVI, one snapshot file).
+
+Per episode (SPEC §6; the AWDA paper's evaluator for the baseline)::
+
+    demo video (demonstrator, other layout) --10 frames--> ResNet features, once per episode
+    every step t:  third-person frame o_t (+ wrist depth d_t for +depth) --> ResNet features
+                   [demo features, features of o_{t-5} .. o_t] --> attention --> action mixture
+                   a_t = sample | mean | mode of the mixture; gripper command binarized (+1 / -1)
+
+The agent stack is a sliding window of the last ``frame_stack`` frames; at the start of an episode
+the missing older frames repeat the first one, exactly as the training samples do
+(:class:`~awda_bench.data.datasets.TosviDataset`). The ResNet sees each frame on its own (frozen
+BatchNorm statistics in eval mode), so each frame's features are computed once and kept: a step
+costs one frame through the ResNet plus the attention layers, not sixteen frames.
+
+Frames are rendered by the harness camera (the suite's size) and area-downscaled to the snapshot's
+input size with OpenCV, as the ``train`` loader downscales the collected frames. The network only
+sees images; it never reads simulator state.
+
+``action_select`` (``run --action-select``): ``sample`` (the reference's evaluator, default),
+``mean`` (the mixture mean) or ``mode`` (the heaviest component's mean); the AWDA paper compares
+them for T-OSVI (seed S3). ``sample`` draws from torch's global generator, which the harness seeds
+per episode, so an episode replays identically.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from awda_bench.errors import CorruptFileError, UnknownChoiceError
+from awda_bench.policies.base import EpisodeContext
+
+ACTION_SELECTS: tuple[str, ...] = ("sample", "mean", "mode")
+"""How an action is read from the predicted mixture; the first is the default."""
+
+TOSVI_ARCHS: tuple[str, ...] = ("tosvi", "tosvi-depth")
+"""Snapshot architectures this policy runs (the ``no-waypoints`` ablation trains a ``tosvi`` net)."""
+
+
+def tosvi_method_name(base: str, action_select: str) -> str:
+    """``tosvi`` + ``mean`` -> ``tosvi-mean``; the default selection keeps the base name."""
+    if action_select not in ACTION_SELECTS:
+        raise UnknownChoiceError("--action-select", action_select, ACTION_SELECTS)
+    return base if action_select == ACTION_SELECTS[0] else f"{base}-{action_select}"
+
+
+def _resize(frame: np.ndarray, height: int, width: int, nearest: bool = False) -> np.ndarray:
+    import cv2
+
+    if frame.shape[:2] == (height, width):
+        return frame
+    interpolation = cv2.INTER_NEAREST if nearest else cv2.INTER_AREA
+    return cv2.resize(frame, (width, height), interpolation=interpolation)
+
+
+class TosviPolicy:
+    """Closed loop: one forward pass of a :class:`~awda_bench.models.tosvi_net.TosviNet` per step."""
+
+    name = "tosvi"
+
+    def __init__(
+        self, snapshot: str | Path, action_select: str = "sample", arch: str | None = None
+    ) -> None:
+        import torch
+
+        from awda_bench.models.snapshot import load_snapshot
+        from awda_bench.models.tosvi_net import TosviNet
+
+        if action_select not in ACTION_SELECTS:
+            raise UnknownChoiceError("--action-select", action_select, ACTION_SELECTS)
+        loaded = load_snapshot(Path(snapshot))
+        wanted = (arch,) if arch is not None else TOSVI_ARCHS
+        if loaded.arch not in wanted:
+            raise CorruptFileError(
+                f"snapshot {snapshot} holds a {loaded.arch!r} model, not {' or '.join(wanted)}; "
+                "pick a checkpoint directory trained with --method "
+                f"{' / '.join(wanted)} (or --ablation no-waypoints)"
+            )
+        self.device = "cuda" if torch.cuda.is_available() else "cpu"
+        model = loaded.build_model(self.device)
+        if not isinstance(model, TosviNet):
+            raise CorruptFileError(f"snapshot {snapshot} did not build a TosviNet")
+        model.eval()
+        self.model: TosviNet = model
+        self.action_select = action_select
+        cfg = model.config
+        self.image_size = (cfg.trunk.image_height_px, cfg.trunk.image_width_px)
+        self.depth_size = (cfg.depth_height_px, cfg.depth_width_px)
+        self.use_depth = cfg.use_depth
+        self.frame_stack = cfg.frame_stack
+        self._demo_envs: dict[tuple[str, str], Any] = {}
+        self._env: Any = None
+        self._demo_features: Any = None
+        self._frames: deque[Any] = deque(maxlen=self.frame_stack)
+        self._depths: deque[np.ndarray] = deque(maxlen=self.frame_stack)
+        self.inference_s = 0.0
+        """Wall time of this episode's forward passes [s] (rendering excluded)."""
+        self.steps = 0
+        """Actions produced this episode."""
+
+    def _to_tensor(self, frames: np.ndarray) -> Any:
+        """``(N, H, W, 3)`` uint8 at any size -> ``(1, N, 3, h, w)`` float on the model's device."""
+        from awda_bench.models.predict import frames_to_tensor
+
+        h, w = self.image_size
+        small = np.stack([_resize(f, h, w) for f in frames])
+        return frames_to_tensor(small, h, w).unsqueeze(0).to(self.device)
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        import torch
+
+        from awda_bench.demo_recording import demo_video_frames
+        from awda_bench.suites import load_suite
+
+        self._env = ctx.env
+        demo = ctx.extras.get("demo_frames")
+        if demo is None:
+            suite = load_suite(ctx.spec.suite)
+            demo = demo_video_frames(
+                suite,
+                ctx.spec.task,
+                ctx.spec.demo_seed,
+                self._demo_envs,
+                self.model.config.trunk.demo_frames,
+            )
+            ctx.extras["demo_frames"] = list(demo)
+        start = time.perf_counter()
+        with torch.no_grad():
+            self._demo_features = self.model.trunk.frame_features(self._to_tensor(np.asarray(demo)))
+        self.inference_s = time.perf_counter() - start
+        self._frames.clear()
+        self._depths.clear()
+        self.steps = 0
+
+    def _observe(self) -> None:
+        """Render o_t (and d_t), encode it, push it on the stacks (padding the first one)."""
+        import torch
+
+        from awda_bench.robot.cameras import capture_rgb, capture_wrist_depth
+
+        rgb = capture_rgb(self._env)[0]
+        depth = None
+        if self.use_depth:
+            h, w = self.depth_size
+            depth = _resize(capture_wrist_depth(self._env).depth_m[0], h, w, nearest=True)
+        start = time.perf_counter()
+        with torch.no_grad():
+            features = self.model.trunk.frame_features(self._to_tensor(rgb[None]))[:, 0]
+        self.inference_s += time.perf_counter() - start
+        copies = self.frame_stack if not self._frames else 1
+        for _ in range(copies):
+            self._frames.append(features)
+            if depth is not None:
+                self._depths.append(depth)
+
+    def act(self, obs: Any) -> np.ndarray:
+        import torch
+
+        if self._demo_features is None:
+            raise RuntimeError("TosviPolicy.act() before reset(ctx)")
+        self._observe()
+        start = time.perf_counter()
+        with torch.no_grad():
+            features = torch.cat((self._demo_features, torch.stack(tuple(self._frames), 1)), 1)
+            depth = None
+            if self.use_depth:
+                stack = np.stack(tuple(self._depths))[None, :, None]  # (1, S, 1, Hd, Wd)
+                depth = torch.from_numpy(stack.astype(np.float32)).to(self.device)
+            policy, _ = self.model.heads_from_features(features, depth)
+            dist = self.model.distribution(policy)
+            if self.action_select == "sample":
+                action = dist.sample()
+            elif self.action_select == "mean":
+                action = dist.mean()
+            else:
+                action = dist.mode()
+        self.inference_s += time.perf_counter() - start
+        self.steps += 1
+        out = action.float().cpu().numpy().reshape(1, -1).clip(-1.0, 1.0)
+        out[:, 3] = np.where(out[:, 3] > 0.0, 1.0, -1.0)  # gripper command binarized
+        return out.astype(np.float32)
+
+    @property
+    def done(self) -> bool:
+        return False
+
+    @property
+    def waypoints(self) -> np.ndarray | None:
+        return None
+
+
+def tosvi(snapshot: str | Path) -> TosviPolicy:
+    """``tosvi``: a ``tosvi`` snapshot (T-OSVI, or the ``no-waypoints`` ablation), sampled actions."""
+    return TosviPolicy(snapshot, "sample", arch="tosvi")
+
+
+def tosvi_mean(snapshot: str | Path) -> TosviPolicy:
+    return TosviPolicy(snapshot, "mean", arch="tosvi")
+
+
+def tosvi_mode(snapshot: str | Path) -> TosviPolicy:
+    return TosviPolicy(snapshot, "mode", arch="tosvi")
+
+
+def tosvi_depth(snapshot: str | Path) -> TosviPolicy:
+    """``tosvi-depth``: a ``tosvi-depth`` snapshot, sampled actions."""
+    policy = TosviPolicy(snapshot, "sample", arch="tosvi-depth")
+    policy.name = "tosvi-depth"
+    return policy
+
+
+def tosvi_depth_mean(snapshot: str | Path) -> TosviPolicy:
+    policy = TosviPolicy(snapshot, "mean", arch="tosvi-depth")
+    policy.name = "tosvi-depth"
+    return policy
+
+
+def tosvi_depth_mode(snapshot: str | Path) -> TosviPolicy:
+    policy = TosviPolicy(snapshot, "mode", arch="tosvi-depth")
+    policy.name = "tosvi-depth"
+    return policy

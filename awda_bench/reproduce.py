@@ -1,0 +1,539 @@
+"""``reproduce``: from an empty directory to Table S3/S4 rows, one resumable command.
+
+::
+
+    OUT/data/train        collect --split train   (agent + demonstrator episodes, synthesized)
+    OUT/data/test         collect --split test    (validation pairs; pick-place only)
+    OUT/checkpoints/COL   train  (one Table S3 column each: snapshots every M steps)
+    OUT/runs              run    (last N snapshots x the protocol's episodes, one store, the
+                                  column's key as the method label); Full-1 also on two training
+                                  tasks ("full-1 (train tasks)") to tell a failure to generalize
+                                  from a failure to fit
+    OUT/report            report (tables, figures, summary.json) + reproduce.md (scale vs paper)
+
+Every stage is an ordinary command (``collect``, ``train``, ``run``, ``report``) run as a
+subprocess with its arguments printed, and every one of them resumes by itself: a re-run skips
+finished collections (their manifest is complete and describes the same request), finished training
+runs (the last snapshot is at the recipe's step) and evaluated episodes (the store holds them for
+the same protocol fingerprint, label and snapshot hash). Before anything runs, the plan is printed
+with an estimated wall time per stage from the per-unit costs in :data:`COSTS` (measured on the
+2-core CPU machine this project is developed on; a GPU trains much faster).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from awda_bench.errors import UnknownChoiceError, UsageError
+from awda_bench.training.columns import COLUMNS, Column
+
+SUITES: tuple[str, ...] = ("pick_place", "mosaic")
+"""Suites ``reproduce`` knows how to lay out."""
+
+
+def column_key(column: Column) -> str:
+    """``full-1``, ``no-adm``, ``tosvi``, ...: the ``--columns`` name and the method label."""
+    if column.ablation is not None:
+        return column.ablation
+    return "full-1" if column.method == "awda" else column.method
+
+
+COLUMN_KEYS: dict[str, Column] = {column_key(c): c for c in COLUMNS}
+"""``--columns`` names, in Table S3's order."""
+
+DEFAULT_COLUMNS: tuple[str, ...] = ("full-1", "tosvi")
+
+EVAL_METHOD: dict[str, str] = {"awda": "awda", "tosvi": "tosvi", "tosvi-depth": "tosvi-depth"}
+"""Network architecture -> the ``run --method`` that evaluates its snapshots."""
+
+FIT_CHECK_COLUMN = "full-1"
+FIT_CHECK_LABEL = "full-1 (train tasks)"
+FIT_CHECK_TASKS = 2
+FIT_CHECK_SNAPSHOTS = 3
+"""Full-1's last 3 snapshots on the first 2 training tasks (same episodes per task)."""
+
+
+@dataclass(frozen=True)
+class Costs:
+    """Per-unit wall times [s] for the printed estimate (2-core CPU machine, idle, 2026-11)."""
+
+    collect_episode_s: float = 2.1
+    """Per kept episode with 2 workers at 240x320 (760 episodes in 1588 s)."""
+    train_step_s: dict[str, float] = field(
+        default_factory=lambda: {"awda": 2.23, "tosvi": 3.16, "tosvi-depth": 4.5}
+    )
+    """Per step of the ``small`` recipe, 2 threads (tosvi-depth: not measured, scaled)."""
+    paper_step_factor: float = 32.0
+    """``paper`` recipe step cost ÷ ``small``'s on a CPU (~71 s vs 2.23 s)."""
+    eval_episode_s: dict[str, float] = field(
+        default_factory=lambda: {"awda": 1.5, "tosvi": 10.0, "tosvi-depth": 13.0}
+    )
+    """Per evaluated episode, one worker (awda: open loop, one forward pass; tosvi: a frame and
+    a forward pass every step for the whole horizon)."""
+
+
+COSTS = Costs()
+
+
+@dataclass(frozen=True)
+class ReproduceConfig:
+    """Everything ``python -m awda_bench reproduce`` decides."""
+
+    suite: str
+    out: Path
+    recipe: str = "small"
+    columns: tuple[str, ...] = DEFAULT_COLUMNS
+    hold_out: str | None = None
+    workers: int = 2
+    episodes_per_task: int = 20
+    synthesize: int = 200
+    val_episodes_per_task: int = 5
+    snapshots: int = 10
+    episodes: int | None = None
+    steps: int | None = None
+    threads: int | None = None
+    fit_check: bool = True
+    dry_run: bool = False
+
+
+@dataclass
+class Stage:
+    """One command of the pipeline."""
+
+    name: str
+    argv: list[str]
+    estimate_s: float
+    done: bool
+    detail: str = ""
+
+
+def parse_columns(text: str) -> tuple[str, ...]:
+    names = tuple(n.strip() for n in text.split(",") if n.strip())
+    if not names:
+        raise UsageError("--columns is empty; name at least one, e.g. full-1,tosvi")
+    for n in names:
+        if n not in COLUMN_KEYS:
+            raise UnknownChoiceError("column", n, tuple(COLUMN_KEYS))
+    if len(set(names)) != len(names):
+        raise UsageError(f"--columns names a column twice: {text}")
+    return names
+
+
+def _manifest(path: Path) -> dict[str, Any] | None:
+    try:
+        return dict(json.loads((path / "manifest.json").read_text()))
+    except (OSError, ValueError):
+        return None
+
+
+def _collection_done(path: Path, split: str, per_task: int, synthesize: int) -> bool:
+    manifest = _manifest(path)
+    if manifest is None or not manifest.get("complete"):
+        return False
+    d = manifest.get("definition", {})
+    return (
+        d.get("split") == split
+        and d.get("episodes_per_task") == per_task
+        and d.get("synthesize", 0) == synthesize
+    )
+
+
+def _train_target(recipe_name: str, steps: int | None) -> int:
+    from awda_bench.training.recipe import load_recipe
+
+    return steps if steps is not None else load_recipe(recipe_name).train.max_steps
+
+
+def _training_done(ckpt: Path, target: int) -> bool:
+    from awda_bench.models.snapshot import SNAPSHOT_PATTERN, list_snapshots
+
+    found = list_snapshots(ckpt)
+    if not found:
+        return False
+    match = SNAPSHOT_PATTERN.match(found[-1].name)
+    return match is not None and int(match.group(1)) >= target
+
+
+def _eval_remaining(run_args: list[str], checkpoints: Path | None) -> int | None:
+    """Episodes ``run`` would still play (``None``: cannot tell yet, e.g. no snapshots)."""
+    from awda_bench.commands.run import add_parser, config_from_args
+    from awda_bench.harness.results_store import STORE_NAME, ResultsStore
+    from awda_bench.harness.sweep import prepare_sweep
+
+    if checkpoints is not None and not _has_snapshots(checkpoints):
+        return None
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    add_parser(parser.add_subparsers())
+    args = parser.parse_args(["run", *run_args])
+    try:
+        plan = prepare_sweep(config_from_args(args))
+    except UsageError:
+        return None
+    out = Path(args.out)
+    if not (out / STORE_NAME).is_file():
+        return len(plan.jobs)
+    with ResultsStore(out, create=False) as store:
+        done = {
+            snap.sha256: store.finished_keys(
+                plan.protocol.fingerprint, plan.method.name, snap.sha256
+            )
+            for snap in plan.snapshots
+        }
+    return sum((j.spec.task, j.spec.episode) not in done[j.snapshot.sha256] for j in plan.jobs)
+
+
+def _has_snapshots(ckpt: Path) -> bool:
+    from awda_bench.models.snapshot import list_snapshots
+
+    return bool(list_snapshots(ckpt))
+
+
+def _eval_tasks(suite_name: str, hold_out: str | None) -> tuple[list[int], int]:
+    """``run --task`` restriction and the number of evaluation units (tasks or families)."""
+    from awda_bench.suites import load_suite
+
+    suite = load_suite(suite_name)
+    tasks = [t for t in suite.eval_tasks]
+    if hold_out is not None:
+        families = sorted({t.family for t in suite.tasks})
+        if hold_out not in families:
+            raise UnknownChoiceError("--hold-out family", hold_out, families)
+        tasks = [t for t in tasks if t.family == hold_out]
+        if not tasks:
+            raise UsageError(f"--hold-out {hold_out}: suite {suite_name!r} evaluates no such task")
+        return [t.index for t in tasks], 1
+    units = len({t.family for t in tasks}) if suite.episode_unit == "family" else len(tasks)
+    return [], units
+
+
+def plan_stages(config: ReproduceConfig) -> list[Stage]:
+    """The pipeline for ``config``, each stage marked done or not (nothing runs here)."""
+    from awda_bench.suites import load_suite
+
+    if config.suite not in SUITES:
+        raise UnknownChoiceError("suite", config.suite, SUITES)
+    if config.workers < 1:
+        raise UsageError(f"--workers must be at least 1 (got {config.workers})")
+    if config.suite == "mosaic" and config.hold_out is None:
+        raise UsageError(
+            "--suite mosaic needs --hold-out FAMILY (train on the other families, evaluate that "
+            "one), e.g. --hold-out drawer"
+        )
+    if config.suite == "pick_place" and config.hold_out is not None:
+        raise UsageError("--hold-out is for --suite mosaic; pick_place holds out tasks 14 and 15")
+    suite = load_suite(config.suite)
+    out = config.out
+    data, test = out / "data" / "train", out / "data" / "test"
+    workers = ["--workers", str(config.workers)]
+    stages: list[Stage] = []
+    from awda_bench.data.plan import split_tasks
+
+    n_train = len(split_tasks(suite, "train")) * config.episodes_per_task * 2 + config.synthesize
+    stages.append(
+        Stage(
+            "collect train",
+            [
+                "collect", "--suite", config.suite, "--split", "train",
+                "--episodes-per-task", str(config.episodes_per_task),
+                "--synthesize", str(config.synthesize), "--out", str(data), *workers,
+            ],
+            n_train * COSTS.collect_episode_s * 2 / config.workers,
+            _collection_done(data, "train", config.episodes_per_task, config.synthesize),
+            f"{n_train} episodes",
+        )
+    )  # fmt: skip
+    val: list[str] = []
+    if config.hold_out is None:
+        n_test = len(suite.eval_tasks) * config.val_episodes_per_task * 2
+        stages.append(
+            Stage(
+                "collect test",
+                [
+                    "collect", "--suite", config.suite, "--split", "test",
+                    "--episodes-per-task", str(config.val_episodes_per_task),
+                    "--out", str(test), *workers,
+                ],
+                n_test * COSTS.collect_episode_s * 2 / config.workers,
+                _collection_done(test, "test", config.val_episodes_per_task, 0),
+                f"{n_test} validation episodes",
+            )
+        )  # fmt: skip
+        val = ["--val-data", str(test)]
+    target = _train_target(config.recipe, config.steps)
+    factor = COSTS.paper_step_factor if config.recipe == "paper" else 1.0
+    tasks, units = _eval_tasks(config.suite, config.hold_out)
+    episodes = config.episodes if config.episodes is not None else suite.episodes_per_task
+    runs = out / "runs"
+    for key in config.columns:
+        column = COLUMN_KEYS[key]
+        ckpt = out / "checkpoints" / key
+        argv = [
+            "train", "--method", column.method, "--data", str(data), "--out", str(ckpt),
+            "--recipe", config.recipe, *val, "--no-progress",
+        ]  # fmt: skip
+        if column.ablation is not None:
+            argv += ["--ablation", column.ablation]
+        if config.hold_out is not None:
+            argv += ["--hold-out", config.hold_out]
+        if config.steps is not None:
+            argv += ["--steps", str(config.steps)]
+        if config.threads is not None:
+            argv += ["--threads", str(config.threads)]
+        step_s = COSTS.train_step_s[column.arch] * factor
+        stages.append(
+            Stage(
+                f"train {key}", argv, target * step_s, _training_done(ckpt, target),
+                f"{column.name}: {target} steps",
+            )
+        )  # fmt: skip
+        method = EVAL_METHOD[column.arch]
+        run_argv = [
+            "--suite", config.suite, "--method", method, "--checkpoints", str(ckpt),
+            "--snapshots", str(config.snapshots), "--label", key, "--out", str(runs),
+            *workers, "--no-progress", *(a for t in tasks for a in ("--task", str(t))),
+        ]  # fmt: skip
+        if config.episodes is not None:
+            run_argv += ["--episodes", str(config.episodes)]
+        n_eval = config.snapshots * episodes * units
+        remaining = _eval_remaining(run_argv, ckpt)
+        stages.append(
+            Stage(
+                f"evaluate {key}",
+                ["run", *run_argv],
+                (n_eval if remaining is None else remaining)
+                * COSTS.eval_episode_s[column.arch]
+                / config.workers,
+                remaining == 0,
+                f"{config.snapshots} snapshots x {episodes} episodes x {units} "
+                f"{'family' if suite.episode_unit == 'family' else 'tasks'}",
+            )
+        )
+        if key == FIT_CHECK_COLUMN and config.fit_check and config.hold_out is None:
+            train_tasks = [str(t.index) for t in suite.train_tasks[:FIT_CHECK_TASKS]]
+            fit_argv = [
+                "--suite", config.suite, "--method", method, "--checkpoints", str(ckpt),
+                "--snapshots", str(FIT_CHECK_SNAPSHOTS), "--label", FIT_CHECK_LABEL,
+                "--split", "train", "--out", str(out / "runs-train-tasks"), *workers,
+                "--no-progress",
+                *(a for t in train_tasks for a in ("--task", t)),
+            ]  # fmt: skip
+            if config.episodes is not None:
+                fit_argv += ["--episodes", str(config.episodes)]
+            remaining = _eval_remaining(fit_argv, ckpt)
+            n_fit = FIT_CHECK_SNAPSHOTS * episodes * FIT_CHECK_TASKS
+            stages.append(
+                Stage(
+                    f"evaluate {key} on training tasks",
+                    ["run", *fit_argv],
+                    (n_fit if remaining is None else remaining)
+                    * COSTS.eval_episode_s[column.arch]
+                    / config.workers,
+                    remaining == 0,
+                    f"tasks {', '.join(train_tasks)}: did it fit?",
+                )
+            )
+    stages.append(
+        Stage(
+            "report",
+            ["report", "--runs", str(runs), "--out", str(out / "report")],
+            10.0,
+            False,
+            "tables, figures, reproduce.md",
+        )
+    )
+    if any(st.name.endswith("on training tasks") for st in stages):
+        stages.append(
+            Stage(
+                "report training tasks",
+                [
+                    "report", "--runs", str(out / "runs-train-tasks"),
+                    "--out", str(out / "report" / "train-tasks"),
+                ],
+                10.0,
+                False,
+                "the fit check's tables",
+            )
+        )  # fmt: skip
+    return stages
+
+
+def _clock(seconds: float) -> str:
+    minutes = round(seconds / 60.0)
+    return f"{minutes // 60} h {minutes % 60:02d} min" if minutes >= 60 else f"{minutes} min"
+
+
+def format_plan(config: ReproduceConfig, stages: list[Stage]) -> str:
+    lines = [
+        f"reproduce {config.suite}, recipe {config.recipe}, columns {', '.join(config.columns)}"
+        + (f", hold-out {config.hold_out}" if config.hold_out else "")
+        + f" -> {config.out}"
+    ]
+    todo = 0.0
+    for stage in stages:
+        state = "done" if stage.done else f"~{_clock(stage.estimate_s)}"
+        if not stage.done:
+            todo += stage.estimate_s
+        lines.append(f"  {stage.name:<34} {state:>12}  {stage.detail}")
+    lines.append(f"  estimated total for what is left: {_clock(todo)} (2-core CPU figures)")
+    return "\n".join(lines)
+
+
+def run_stages(config: ReproduceConfig, stages: list[Stage]) -> list[tuple[str, float]]:
+    """Run every stage not done, in order; returns ``(stage, wall s)``; raises on a failure."""
+    timings: list[tuple[str, float]] = []
+    for stage in stages:
+        if stage.done:
+            print(f"[reproduce] {stage.name}: done, skipped", flush=True)
+            continue
+        argv = [sys.executable, "-m", "awda_bench", *stage.argv]
+        print(f"[reproduce] {stage.name}: {' '.join(argv[1:])}", flush=True)
+        start = time.perf_counter()
+        code = subprocess.call(argv)
+        wall = time.perf_counter() - start
+        if code != 0:
+            raise UsageError(
+                f"stage {stage.name!r} exited {code} after {wall:.0f} s; fix what it printed and "
+                "re-run the same reproduce command (finished stages are skipped)"
+            )
+        timings.append((stage.name, wall))
+        print(f"[reproduce] {stage.name}: {wall:.0f} s", flush=True)
+    return timings
+
+
+PAPER_S3_PICK_PLACE: dict[str, str] = {
+    "full-1": "1.0 ± .00",
+    "single-head": ".99 ± .00",
+    "no-ad": "1.0 ± .00",
+    "no-adm": ".98 ± .01",
+    "no-waypoints": ".01 ± .02",
+    "only-waypoints": ".98 ± .01",
+    "tosvi": ".10 ± .05",
+    "tosvi-depth": ".00 ± .00",
+}
+"""Table S3, pick-and-place row, of the AWDA supplementary (mean ± SE over 10 snapshots)."""
+
+PAPER_S4: dict[tuple[str, str], str] = {("full-1", "drawer"): "0.29 ± 0.033"}
+"""Table S4 cells of the supplementary this pipeline can produce (MOSAIC's own drawer number,
+0.15 ± 0.038, is another method's)."""
+
+PAPER_SCALE = {
+    "image": "240x320",
+    "demos_per_task": "100 per task per embodiment (reference collection)",
+    "steps": "not stated for pick-and-place; snapshots every 10k steps, batch 30",
+}
+
+
+def _fmt(mean: float | None, se: float | None) -> str:
+    return "n/a" if mean is None or se is None else f"{mean:.2f} ± {se:.2f}"
+
+
+def write_summary(config: ReproduceConfig, timings: list[tuple[str, float]]) -> Path:
+    """``OUT/report/reproduce.md``: scale vs the paper, our rows beside the paper's, costs."""
+    from awda_bench.harness.results_store import STORE_NAME, ResultsStore
+    from awda_bench.training.recipe import load_recipe
+
+    out = config.out
+    report = out / "report"
+    summary = json.loads((report / "summary.json").read_text())
+    recipe = load_recipe(config.recipe)
+    manifest = _manifest(out / "data" / "train") or {}
+    d = manifest.get("definition", {})
+    counts = manifest.get("counts", {}).get("by_role", {})
+    kept = {role: c.get("kept") for role, c in counts.items()}
+    group = config.hold_out or "all"
+    cells = {
+        c["method"]: c
+        for c in summary["cells"]
+        if c["suite"] == config.suite and c["group"] == group
+    }
+    lines = [
+        f"# reproduce: {config.suite}"
+        + (f", held-out family {config.hold_out}" if config.hold_out else ""),
+        "",
+        "Generated by `python -m awda_bench reproduce`; every number below was measured by this "
+        "pipeline. Paper values are in their own column and never enter ours.",
+        "",
+        "## Scale (ours vs the paper)",
+        "",
+        "| | ours | paper |",
+        "|---|---|---|",
+        f"| recipe | `{recipe.name}` (sha256 {recipe.sha256[:12]}) | `paper` (Table S2) |",
+        f"| network input | {recipe.model.image_height_px}x{recipe.model.image_width_px} "
+        f"(collected at {'x'.join(map(str, d.get('image_size', [])))}) | {PAPER_SCALE['image']} |",
+        f"| demos per training task | {d.get('episodes_per_task')} per embodiment; "
+        f"{d.get('synthesize', 0)} synthesized; kept {kept} | {PAPER_SCALE['demos_per_task']} |",
+        f"| training | {recipe.train.max_steps} steps x batch {recipe.train.batch_size}, snapshot "
+        f"every {recipe.train.snapshot_every_steps} | {PAPER_SCALE['steps']} |",
+        f"| dataset fingerprint | `{manifest.get('fingerprint')}` | – |",
+        f"| evaluation | last {config.snapshots} snapshots x the suite's episodes per held-out "
+        f"unit | last 10 snapshots x 20 episodes |",
+        "",
+        "## Success on held-out tasks (success_once; mean ± SE over snapshots)",
+        "",
+        "| column | ours | snapshots | episodes | paper |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    for key in config.columns:
+        c = cells.get(key)
+        paper = (
+            PAPER_S3_PICK_PLACE.get(key, "–")
+            if config.suite == "pick_place"
+            else PAPER_S4.get((key, config.hold_out or ""), "–")
+        )
+        if c is None:
+            lines.append(f"| {COLUMN_KEYS[key].name} (`{key}`) | not evaluated | | | {paper} |")
+        else:
+            lines.append(
+                f"| {COLUMN_KEYS[key].name} (`{key}`) | {_fmt(c['mean'], c['se'])} | "
+                f"{c['snapshots']}/{c['snapshots_planned']} | {c['episodes']} | {paper} |"
+            )
+    fit_summary = report / "train-tasks" / "summary.json"
+    fit_cells = json.loads(fit_summary.read_text())["cells"] if fit_summary.is_file() else []
+    fit = next(
+        (c for c in fit_cells if c["method"] == FIT_CHECK_LABEL and c["group"] == "all"), None
+    )
+    if fit is not None:
+        lines += [
+            "",
+            f"Full-1 on training tasks (fit check, last {fit['snapshots']} snapshots): "
+            f"{_fmt(fit['mean'], fit['se'])} over {fit['episodes']} episodes.",
+        ]
+    with ResultsStore(out / "runs", create=False) as store:
+        rows = store.raw(
+            "SELECT method, COUNT(*), AVG(steps), AVG(wall_time_s), AVG(act_time_s), "
+            "AVG(env_time_s), AVG(reached), AVG(grasped), AVG(success_once) FROM episodes "
+            "WHERE status='ok' GROUP BY method ORDER BY method"
+        )
+    lines += [
+        "",
+        "## Why: reached / grasped, and what an episode costs",
+        "",
+        "| label | episodes | reached | grasped | success | steps | wall s | policy s | env s |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for m, n, steps, wall, act, env, reached, grasped, success in rows:
+        r = "–" if reached is None else f"{reached:.2f}"
+        g = "–" if grasped is None else f"{grasped:.2f}"
+        lines.append(
+            f"| {m} | {n} | {r} | {g} | {success:.2f} | {steps:.0f} | {wall:.2f} | {act:.2f} | "
+            f"{env:.2f} |"
+        )
+    if timings:
+        lines += ["", "## Stage wall times (this invocation)", ""]
+        lines += [f"- {name}: {wall / 60:.1f} min" for name, wall in timings]
+    lines += [
+        "",
+        f"Store: `{out / 'runs' / STORE_NAME}`; tables: `report.md` beside this file.",
+        "",
+    ]
+    path = report / "reproduce.md"
+    path.write_text("\n".join(lines))
+    return path
