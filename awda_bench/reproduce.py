@@ -303,7 +303,9 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         if config.episodes is not None:
             run_argv += ["--episodes", str(config.episodes)]
         n_eval = config.snapshots * episodes * units
-        remaining = _eval_remaining(run_argv, ckpt)
+        trained = _training_done(ckpt, target)
+        # until training is done the snapshots to evaluate are not all there: plan all of them
+        remaining = _eval_remaining(run_argv, ckpt) if trained else None
         stages.append(
             Stage(
                 f"evaluate {key}",
@@ -327,7 +329,7 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             ]  # fmt: skip
             if config.episodes is not None:
                 fit_argv += ["--episodes", str(config.episodes)]
-            remaining = _eval_remaining(fit_argv, ckpt)
+            remaining = _eval_remaining(fit_argv, ckpt) if trained else None
             n_fit = FIT_CHECK_SNAPSHOTS * episodes * FIT_CHECK_TASKS
             stages.append(
                 Stage(

@@ -189,3 +189,72 @@ def test_edge_cut_separates_an_object_from_a_wall_it_touches_in_the_image() -> N
     cut = _localize(cam, [wall, obj], LocalizationConfig(edge_jump_m=0.01))
     assert cut is not None and cut.n_proposals == 2
     assert np.linalg.norm(cut.position_world - [0.0, 0.035, 0.14]) < 0.005
+
+
+# -- waypoint-guided selection (select="waypoint") --------------------------------------------
+GUIDED = LocalizationConfig(select="waypoint")
+
+
+def _guided(cam_pos, boxes, target, config=GUIDED):
+    cam_pos = np.asarray(cam_pos, dtype=float)
+    depth = CAM.render(cam_pos, boxes)
+    return localize_object(
+        depth, CAM.K, CAM.cam2world(cam_pos), config, target_world=np.asarray(target, float)
+    )
+
+
+def test_waypoint_picks_the_off_centre_object_it_points_at() -> None:
+    centre_obj, other = _box(0.0, 0.0, h=0.08), _box(0.09, 0.05, h=0.06)
+    cam = [0.0, 0.0, 0.45]
+    by_centre = _guided(cam, [centre_obj, other], [0.09, 0.05, 0.06], LocalizationConfig())
+    assert by_centre is not None and np.linalg.norm(by_centre.position_world[:2]) < 0.005
+    by_waypoint = _guided(cam, [centre_obj, other], [0.085, 0.045, 0.05])
+    assert by_waypoint is not None and by_waypoint.n_proposals == 2
+    assert np.linalg.norm(by_waypoint.position_world - [0.09, 0.05, 0.06]) < 0.005
+    # no waypoint given: the reference rule
+    no_target = localize_object(
+        CAM.render(np.array(cam), [centre_obj, other]), CAM.K, CAM.cam2world(np.array(cam)), GUIDED
+    )
+    assert no_target is not None and np.linalg.norm(no_target.position_world[:2]) < 0.005
+
+
+def test_a_handle_separates_from_the_panel_it_is_mounted_on() -> None:
+    # a drawer front seen from above: a 2 cm-wide panel top at 12 cm, the handle bar 4 cm in front
+    # of it standing 3 cm proud (touching it in the image); the waypoint is at the handle
+    panel = Box(center_xy=np.array([0.0, 0.0]), size=np.array([0.3, 0.02, 0.12]))
+    handle = Box(center_xy=np.array([0.0, 0.025]), size=np.array([0.08, 0.03, 0.15]))
+    cam = [0.0, 0.0, 0.5]
+    cut = LocalizationConfig(select="waypoint", edge_jump_m=0.01, min_area_px=5)
+    merged = _guided(cam, [panel, handle], [0.0, 0.03, 0.14], LocalizationConfig(select="waypoint"))
+    assert merged is not None and merged.n_proposals == 1  # without the cut: one blob
+    loc = _guided(cam, [panel, handle], [0.0, 0.03, 0.14], cut)
+    assert loc is not None and loc.n_proposals >= 2
+    assert np.linalg.norm(loc.position_world - [0.0, 0.025, 0.15]) < 0.006
+    panel_pick = _guided(cam, [panel, handle], [0.12, 0.0, 0.12], cut)
+    assert panel_pick is not None and abs(panel_pick.position_world[2] - 0.12) < 1e-3
+
+
+def test_a_nut_is_grasped_on_its_ring_not_in_its_hole() -> None:
+    cam_pos = np.array([0.0, 0.0, 0.4])
+    depth = CAM.render(cam_pos, [])
+    yy, xx = np.mgrid[: CAM.height, : CAM.width]
+    r = np.hypot(xx - 80, yy - 60)
+    depth[(r > 10) & (r < 16)] = 0.37  # a 3 cm nut ring; its centroid is the hole
+    depth[(np.abs(yy - 60) < 3) & (xx > 93) & (xx < 115)] = 0.37  # its handle, to the right
+    K, c2w = CAM.K, CAM.cam2world(cam_pos)
+    handle_point = back_project(105, 60, 0.37, K, c2w)
+    literal = localize_object(depth, K, c2w, LocalizationConfig())
+    assert literal is not None
+    # the reference rule aims at the centroid, in the hole, far from the handle
+    assert np.linalg.norm(literal.position_world[:2] - handle_point[:2]) > 0.03
+    guided = localize_object(depth, K, c2w, LocalizationConfig(select="waypoint"), handle_point)
+    assert guided is not None
+    u, v = guided.pixel
+    assert depth[int(round(v)), int(round(u))] == pytest.approx(0.37)  # on the part, not the hole
+    assert guided.position_world[2] == pytest.approx(0.03, abs=1e-4)
+    assert np.linalg.norm(guided.position_world[:2] - handle_point[:2]) < 0.01
+
+
+def test_select_is_validated() -> None:
+    with pytest.raises(UsageError, match="select must be one of"):
+        LocalizationConfig(select="nearest")

@@ -300,3 +300,31 @@ def test_labels_keep_checkpoint_dirs_apart_and_split_train_evaluates_training_ta
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "another method's name" in err
     assert _digest(out / STORE_NAME) == before
+
+
+def test_grasp_select_folds_into_the_guided_methods(tmp_path: Path, capsys) -> None:
+    import argparse
+
+    from awda_bench.commands.run import add_parser, config_from_args
+    from awda_bench.harness.methods import get_method
+    from awda_bench.policies.gt_waypoints import gt_waypoints_guided
+
+    parser = argparse.ArgumentParser()
+    add_parser(parser.add_subparsers())
+
+    def method(*extra: str) -> str:
+        args = parser.parse_args(["run", "--suite", "mosaic", "--out", str(tmp_path), *extra])
+        return config_from_args(args).method
+
+    assert method("--grasp-select", "centre") == "gt-waypoints"
+    assert method("--grasp-select", "waypoint") == "gt-waypoints-guided"
+    assert method("--method", "awda", "--grasp-select", "waypoint") == "awda-guided"
+    assert get_method("awda-guided").learned
+    policy = gt_waypoints_guided()
+    assert policy.config.localization.select == "waypoint" and policy.name == "gt-waypoints-guided"
+    for bad in (["--method", "scripted"], ["--num-waypoints", "3"]):
+        code = main(["run", "--suite", "mosaic", *bad, "--grasp-select", "waypoint",
+                     "--out", str(tmp_path / "runs")])  # fmt: skip
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and len(err.splitlines()) == 1 and "--grasp-select" in err
+    assert not (tmp_path / "runs").exists()

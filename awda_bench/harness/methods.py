@@ -184,6 +184,19 @@ for _spec in (
         description="learned: AWDA waypoint network snapshots (--checkpoints DIR) + motor primitives",
     ),
     MethodSpec(
+        "gt-waypoints-guided",
+        "awda_bench.policies.gt_waypoints:gt_waypoints_guided",
+        description="gt-waypoints, grasps pick the depth component the waypoint points at "
+        "(--grasp-select waypoint)",
+    ),
+    MethodSpec(
+        "awda-guided",
+        "awda_bench.policies.awda_policy:awda_guided",
+        learned=True,
+        description="awda, grasps pick the depth component the predicted waypoint points at "
+        "(--grasp-select waypoint)",
+    ),
+    MethodSpec(
         "tosvi",
         "awda_bench.policies.tosvi_policy:tosvi",
         learned=True,

@@ -135,3 +135,14 @@ class AWDAPolicy:
     def waypoints(self) -> np.ndarray | None:
         """The (5, 3 + k) waypoints acted on (attributes thresholded)."""
         return self._waypoints
+
+
+def awda_guided(snapshot: str | Path) -> AWDAPolicy:
+    """``awda`` whose grasps pick the depth component the predicted grasp waypoint points at."""
+    from dataclasses import replace
+
+    policy = AWDAPolicy(
+        snapshot, AWDAPolicyConfig(localization=replace(WRIST_LOCALIZATION, select="waypoint"))
+    )
+    policy.name = "awda-guided"
+    return policy

@@ -26,7 +26,7 @@ import torch
 from awda_bench.mining import GraspMiningConfig, PressMiningConfig, mine_grasp, mine_press
 from awda_bench.policies.base import EpisodeContext, EpisodeSpec, Policy
 from awda_bench.primitives.base import RobotState
-from awda_bench.primitives.config import ExecutorConfig, LocalizationConfig
+from awda_bench.primitives.config import GUIDED_SUFFIX, ExecutorConfig, LocalizationConfig
 from awda_bench.primitives.executor import WaypointExecutor
 from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION, WristLocator
 from awda_bench.trajectory import Trajectory
@@ -243,4 +243,14 @@ def gt_waypoints_k8() -> GTWaypointsPolicy:
     """``gt-waypoints`` with K = 8."""
     policy = GTWaypointsPolicy(GTWaypointsConfig(num_waypoints=8))
     policy.name = gt_waypoints_method_name(8)
+    return policy
+
+
+def gt_waypoints_guided() -> GTWaypointsPolicy:
+    """``gt-waypoints`` whose grasps pick the depth component the grasp waypoint points at."""
+    from dataclasses import replace
+
+    config = GTWaypointsConfig(localization=replace(WRIST_LOCALIZATION, select="waypoint"))
+    policy = GTWaypointsPolicy(config)
+    policy.name = "gt-waypoints" + GUIDED_SUFFIX
     return policy

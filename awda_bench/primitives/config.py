@@ -76,6 +76,13 @@ class DropConfig:
         _require_non_negative(self, "settle_steps")
 
 
+GRASP_SELECTS: tuple[str, ...] = ("centre", "waypoint")
+"""``--grasp-select`` values: how the grasp primitive picks the depth component to grasp."""
+
+GUIDED_SUFFIX = "-guided"
+"""Method-name suffix of waypoint-guided grasp selection (``run --grasp-select waypoint``)."""
+
+
 @dataclass(frozen=True)
 class LocalizationConfig:
     """Object localization from one wrist depth image (SPEC §4, six steps)."""
@@ -107,7 +114,19 @@ class LocalizationConfig:
     floor depths vary by +-20 % across the image, so ``"world"`` is the default; for a downward
     camera the two agree."""
 
+    select: str = "centre"
+    """Step 5, which component: ``"centre"`` (the reference) takes the centroid nearest the image
+    centre; ``"waypoint"`` takes the component with a pixel nearest the grasp waypoint's projection
+    into the image (the waypoint says *where* to grasp, the depth image exactly where the object
+    is) and, when the centroid falls off the component (a nut's hole), grasps the component's
+    pixel nearest that projection instead. Without a waypoint, ``"waypoint"`` behaves like
+    ``"centre"``."""
+
     def __post_init__(self) -> None:
+        if self.select not in GRASP_SELECTS:
+            raise UsageError(
+                f"LocalizationConfig.select must be one of {GRASP_SELECTS}, got {self.select!r}"
+            )
         _require_positive(self, "background_m", "above_floor_m", "min_area_px", "max_area_px")
         _require_non_negative(self, "min_depth_m")
         if self.edge_jump_m is not None and not self.edge_jump_m > 0:

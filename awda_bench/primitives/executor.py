@@ -155,6 +155,8 @@ class WaypointExecutor:
             if grasp_flag and not self.holding and self.grasps < c.max_grasps:
                 entry = WaypointLog(i, "grasp")
                 self.log.append(entry)
+                if hasattr(self.locate, "target_world"):
+                    self.locate.target_world = np.asarray(target, dtype=np.float64)  # the guide
                 grasp = Grasp(self.locate, c.grasp, c.motion.max_step_m, fallback_tcp_target=target)
                 self.grasp_primitives.append(grasp)
                 state = yield from self._run_primitive(grasp, entry, state)

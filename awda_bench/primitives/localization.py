@@ -16,7 +16,10 @@ Pure numpy + OpenCV on one image, so it is testable on synthetic depth maps::
    ``M &= (dilate(h) - erode(h)) <= edge_jump_m``, cutting objects from walls they touch in the
    image and leaving their flat tops);
 4. connected components of ``M`` (OpenCV), kept if ``min_area_px <= area <= max_area_px``;
-5. the component whose centroid ``(u_c, v_c)`` is nearest the image centre ``((W-1)/2, (H-1)/2)``;
+5. the component whose centroid ``(u_c, v_c)`` is nearest the image centre ``((W-1)/2, (H-1)/2)``
+   (``select="centre"``, the reference); or (``select="waypoint"`` with a target) the component
+   with a pixel nearest the target's projection ``(u_t, v_t)`` into the image, and as the grasp
+   pixel its centroid if that lies on the component, else its pixel nearest ``(u_t, v_t)``;
 6. back-projection of the centroid's depth ``z``::
 
        p_cam   = z * K^-1 [u_c, v_c, 1]^T
@@ -79,19 +82,30 @@ def pixel_heights(depth_m: np.ndarray, K: np.ndarray, cam2world: np.ndarray) -> 
     return depth_m * (a[None, :] + b[:, None] + r[2]) + r[3]
 
 
+def project(point_world: np.ndarray, K: np.ndarray, cam2world: np.ndarray) -> np.ndarray | None:
+    """Pixel ``(u, v)`` of a world point [m], or ``None`` when it is behind the camera."""
+    world2cam = np.linalg.inv(np.asarray(cam2world, dtype=np.float64))
+    p = world2cam @ np.append(np.asarray(point_world, dtype=np.float64), 1.0)
+    if p[2] <= 1e-6:
+        return None
+    return np.array([K[0, 0] * p[0] / p[2] + K[0, 2], K[1, 1] * p[1] / p[2] + K[1, 2]])
+
+
 def localize_object(
     depth_m: np.ndarray,
     K: np.ndarray,
     cam2world: np.ndarray,
     config: LocalizationConfig = LocalizationConfig(),
+    target_world: np.ndarray | None = None,
 ) -> Localization | None:
-    """Localize the object nearest the image centre, or ``None`` if there is no proposal.
+    """Localize the object nearest the image centre (or the target), ``None`` if none is seen.
 
     Args:
         depth_m: (H, W) depth along the optical axis [m]; 0 where the camera saw nothing.
         K: (3, 3) pinhole intrinsics [px].
         cam2world: (4, 4) camera pose, OpenCV axes.
-        config: thresholds of steps 1-4.
+        config: thresholds of steps 1-4 and the selection rule of step 5.
+        target_world: (3,) where to grasp [m] (the grasp waypoint); used by ``select="waypoint"``.
     """
     depth = np.asarray(depth_m, dtype=np.float32)
     if depth.ndim != 2:
@@ -128,16 +142,31 @@ def localize_object(
     keep = np.flatnonzero((areas >= config.min_area_px) & (areas <= config.max_area_px)) + 1
     if keep.size == 0:
         return None
-    # 5. centroid nearest the image centre
+    # 5. the component nearest the image centre (or the target's projection)
     H, W = depth.shape
     centre = np.array([(W - 1) / 2.0, (H - 1) / 2.0])
-    dist = np.linalg.norm(centroids[keep] - centre, axis=1)
-    label = int(keep[int(np.argmin(dist))])
+    anchor = None
+    if config.select == "waypoint" and target_world is not None:
+        anchor = project(target_world, K, cam2world)
+    if anchor is None:
+        dist = np.linalg.norm(centroids[keep] - centre, axis=1)
+        label = int(keep[int(np.argmin(dist))])
+    else:
+        vs, us = np.nonzero(np.isin(labels, keep))
+        near = np.hypot(us - anchor[0], vs - anchor[1])
+        label = int(labels[vs[int(np.argmin(near))], us[int(np.argmin(near))]])
     u, v = (float(c) for c in centroids[label])
     # 6. back-project the centroid's depth
     ui, vi = int(round(u)), int(round(v))
-    if labels[vi, ui] == label:
+    on_component = 0 <= ui < W and 0 <= vi < H and labels[vi, ui] == label
+    if on_component:
         z = float(depth[vi, ui])
+    elif anchor is not None:
+        # the centroid is off the object (a ring, a U): grasp its pixel nearest the target
+        vs, us = np.nonzero(labels == label)
+        i = int(np.argmin(np.hypot(us - anchor[0], vs - anchor[1])))
+        u, v = float(us[i]), float(vs[i])
+        z = float(depth[vs[i], us[i]])
     else:
         z = float(np.median(depth[labels == label]))
     position = back_project(u, v, z, K, cam2world)

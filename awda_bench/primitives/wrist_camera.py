@@ -11,6 +11,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+
 from awda_bench.primitives.config import LocalizationConfig
 from awda_bench.primitives.localization import Localization, localize_object
 
@@ -63,6 +65,8 @@ class WristLocator:
         self.env_index = env_index
         self.config = config
         self.capture = capture
+        self.target_world: np.ndarray | None = None
+        """Where the current grasp should grasp [m] (its waypoint; ``select="waypoint"``)."""
         self.reset_counters()
 
     def reset_counters(self) -> None:
@@ -76,7 +80,11 @@ class WristLocator:
         t1 = time.perf_counter()
         i = self.env_index
         loc = localize_object(
-            frame.depth_m[i], frame.intrinsic_cv[i], frame.cam2world_cv[i], self.config
+            frame.depth_m[i],
+            frame.intrinsic_cv[i],
+            frame.cam2world_cv[i],
+            self.config,
+            target_world=self.target_world,
         )
         t2 = time.perf_counter()
         self.frames += 1
