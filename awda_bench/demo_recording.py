@@ -214,6 +214,11 @@ DEMO_VIDEO_CACHE_SIZE = 64
 _DEMO_VIDEOS: OrderedDict[tuple[object, ...], np.ndarray] = OrderedDict()
 
 
+def clear_demo_video_cache() -> None:
+    """Forget every cached demo video (benchmarks time the recording)."""
+    _DEMO_VIDEOS.clear()
+
+
 def save_video(frames: np.ndarray, path: str | Path, fps: float) -> Path:
     """Write RGB ``frames`` (F, H, W, 3) uint8 to an MP4 file (OpenCV, ``mp4v``)."""
     import cv2

@@ -7,6 +7,7 @@ chosen one alone, so the CLI starts fast):
     env         task env steps/s with the scripted expert + cost of one rendered frame
     primitives  primitive + executor overhead per env step, rendered frames per episode
     harness     episodes/minute with 1 and 2 workers, harness overhead share
+    episode-cost  per method: wall s, frames rendered, inference ms of one evaluated episode
     inference   waypoint network forward latency
 """
 
@@ -39,6 +40,12 @@ BENCHMARKS: dict[str, tuple[str, str, str, bool]] = {
         "run_harness_bench",
         True,
     ),
+    "episode-cost": (
+        "awda_bench.harness.bench_episode_cost",
+        "add_episode_cost_args",
+        "run_episode_cost_bench",
+        True,
+    ),
     "inference": (
         "awda_bench.models.bench_inference",
         "add_inference_args",
@@ -51,7 +58,7 @@ BENCHMARKS: dict[str, tuple[str, str, str, bool]] = {
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "bench",
-        help="speed benchmarks (controller, env, primitives, harness, inference)",
+        help="speed benchmarks (controller, env, primitives, harness, episode-cost, inference)",
         description="Run one benchmark; 'bench NAME --help' lists its options.",
     )
     parser.add_argument("benchmark", metavar="BENCHMARK", help=f"one of: {', '.join(BENCHMARKS)}")

@@ -1,0 +1,121 @@
+"""``python -m awda_bench bench episode-cost``: what one evaluated episode costs, per method, side by
+side in one run: wall time, steps, rendered frames (the agent's cameras and the demonstrator's
+video), network inference time.
+
+Each ``--method NAME[=CKPT_DIR]`` (a learned method evaluates the last snapshot of CKPT_DIR) plays
+the same ``--episodes`` held-out episodes in this process, one env per method. The demonstrator's
+video is recorded on the first episode a worker sees and cached for every later snapshot
+(:func:`awda_bench.demo_recording.demo_video_frames`), so both costs are printed: ``demo``
+(recording it) and the rest of the episode. Inference is the policy's own timer (``predict_s`` of
+``awda``: one forward pass per episode; ``inference_s`` of ``tosvi``: every step).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+from typing import Any
+
+from awda_bench.errors import UsageError
+
+
+def add_episode_cost_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--method",
+        action="append",
+        required=True,
+        metavar="NAME[=CKPT_DIR]",
+        help="a method, learned ones with their checkpoint directory (repeatable)",
+    )
+    parser.add_argument("--suite", default="pick_place", help="suite (default pick_place)")
+    parser.add_argument("--episodes", type=int, default=4, help="episodes per method (default 4)")
+    parser.add_argument("--threads", type=int, default=1, help="torch threads (default 1)")
+
+
+def _frames(env: Any) -> int:
+    counter = getattr(env, "capture_counter", None)
+    return 0 if counter is None else int(counter.frames)
+
+
+def _demo_frames(policy: Any) -> int:
+    return sum(_frames(e.unwrapped) for e in getattr(policy, "_demo_envs", {}).values())
+
+
+def measure(suite_name: str, method: str, checkpoints: Path | None, episodes: int) -> dict:
+    from awda_bench.demo_recording import clear_demo_video_cache
+    from awda_bench.harness.env_factory import make_env
+    from awda_bench.harness.episode_runner import run_episode
+    from awda_bench.harness.episode_specs import build_episode_specs, make_protocol
+    from awda_bench.harness.methods import get_method, make_policy, select_snapshots
+    from awda_bench.suites import load_suite
+
+    suite = load_suite(suite_name)
+    spec = get_method(method)
+    snapshot = select_snapshots(spec, checkpoints, 1)[0]
+    policy = make_policy(spec, snapshot)
+    env = make_env(suite)
+    specs = build_episode_specs(suite, make_protocol(suite, episodes=episodes, base_seed=0))
+    specs = specs[:episodes]
+    clear_demo_video_cache()
+    rows = []
+    for episode in specs:
+        for cached in (False, True):
+            if not cached:
+                clear_demo_video_cache()
+            agent0, demo0 = _frames(env.unwrapped), _demo_frames(policy)
+            start = time.perf_counter()
+            record = run_episode(env, policy, episode, suite, method=method, snapshot="bench")
+            wall = time.perf_counter() - start
+            inference = float(getattr(policy, "predict_s", getattr(policy, "inference_s", 0.0)))
+            rows.append(
+                {
+                    "cached": cached,
+                    "wall_s": wall,
+                    "steps": record.steps,
+                    "agent_frames": _frames(env.unwrapped) - agent0,
+                    "demo_frames": _demo_frames(policy) - demo0,
+                    "inference_s": inference,
+                    "success": bool(record.success_once),
+                }
+            )
+    env.close()
+    return {"method": method, "rows": rows}
+
+
+def run_episode_cost_bench(args: argparse.Namespace) -> int:
+    import numpy as np
+    import torch
+
+    torch.set_num_threads(args.threads)
+    if args.episodes < 1:
+        raise UsageError(f"--episodes must be at least 1 (got {args.episodes})")
+    results = []
+    for item in args.method:
+        name, _, ckpt = item.partition("=")
+        results.append(measure(args.suite, name, Path(ckpt) if ckpt else None, args.episodes))
+    print(
+        f"{args.suite}: {args.episodes} episodes per method, each played twice (demo video "
+        f"recorded / cached), {args.threads} torch thread(s)"
+    )
+    header = (
+        f"{'method':<16} {'steps':>6} {'wall s':>7} {'wall s (demo cached)':>21} "
+        f"{'agent frames':>13} {'demo frames':>12} {'inference ms/ep':>16} {'ms/step':>8}"
+    )
+    print(header)
+    for r in results:
+        cold = [x for x in r["rows"] if not x["cached"]]
+        warm = [x for x in r["rows"] if x["cached"]]
+
+        def mean(rows: list[dict], key: str) -> float:
+            return float(np.mean([x[key] for x in rows]))
+
+        steps = mean(warm, "steps")
+        inference_ms = 1000 * mean(warm, "inference_s")
+        print(
+            f"{r['method']:<16} {steps:>6.0f} {mean(cold, 'wall_s'):>7.2f} "
+            f"{mean(warm, 'wall_s'):>21.2f} {mean(warm, 'agent_frames'):>13.1f} "
+            f"{mean(cold, 'demo_frames'):>12.1f} {inference_ms:>16.1f} "
+            f"{inference_ms / max(steps, 1):>8.2f}"
+        )
+    return 0
