@@ -100,6 +100,8 @@ class ReproduceConfig:
     threads: int | None = None
     fit_check: bool = True
     dry_run: bool = False
+    progress: bool = True
+    """Let each stage show its progress bar (with ETA) on stderr."""
 
 
 @dataclass
@@ -233,6 +235,7 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
     out = config.out
     data, test = out / "data" / "train", out / "data" / "test"
     workers = ["--workers", str(config.workers)]
+    quiet = [] if config.progress else ["--no-progress"]
     stages: list[Stage] = []
     from awda_bench.data.plan import split_tasks
 
@@ -243,7 +246,7 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             [
                 "collect", "--suite", config.suite, "--split", "train",
                 "--episodes-per-task", str(config.episodes_per_task),
-                "--synthesize", str(config.synthesize), "--out", str(data), *workers,
+                "--synthesize", str(config.synthesize), "--out", str(data), *workers, *quiet,
             ],
             n_train * COSTS.collect_episode_s * 2 / config.workers,
             _collection_done(data, "train", config.episodes_per_task, config.synthesize),
@@ -259,7 +262,7 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
                 [
                     "collect", "--suite", config.suite, "--split", "test",
                     "--episodes-per-task", str(config.val_episodes_per_task),
-                    "--out", str(test), *workers,
+                    "--out", str(test), *workers, *quiet,
                 ],
                 n_test * COSTS.collect_episode_s * 2 / config.workers,
                 _collection_done(test, "test", config.val_episodes_per_task, 0),
@@ -277,7 +280,7 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         ckpt = out / "checkpoints" / key
         argv = [
             "train", "--method", column.method, "--data", str(data), "--out", str(ckpt),
-            "--recipe", config.recipe, *val, "--no-progress",
+            "--recipe", config.recipe, *val, *quiet,
         ]  # fmt: skip
         if column.ablation is not None:
             argv += ["--ablation", column.ablation]
@@ -298,7 +301,7 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         run_argv = [
             "--suite", config.suite, "--method", method, "--checkpoints", str(ckpt),
             "--snapshots", str(config.snapshots), "--label", key, "--out", str(runs),
-            *workers, "--no-progress", *(a for t in tasks for a in ("--task", str(t))),
+            *workers, *quiet, *(a for t in tasks for a in ("--task", str(t))),
         ]  # fmt: skip
         if config.episodes is not None:
             run_argv += ["--episodes", str(config.episodes)]
@@ -324,7 +327,7 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
                 "--suite", config.suite, "--method", method, "--checkpoints", str(ckpt),
                 "--snapshots", str(FIT_CHECK_SNAPSHOTS), "--label", FIT_CHECK_LABEL,
                 "--split", "train", "--out", str(out / "runs-train-tasks"), *workers,
-                "--no-progress",
+                *quiet,
                 *(a for t in train_tasks for a in ("--task", t)),
             ]  # fmt: skip
             if config.episodes is not None:

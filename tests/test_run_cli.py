@@ -280,6 +280,10 @@ def test_labels_keep_checkpoint_dirs_apart_and_split_train_evaluates_training_ta
         fit_rows = db.execute("SELECT method, task FROM episodes").fetchall()
     assert len(fit_rows) == 8 and {t for _, t in fit_rows} == {0, 1}  # the training tasks
     assert {m for m, _ in fit_rows} == {"fit"}
+    # with --task, the fit check's protocol is just those training tasks: nothing "missing"
+    assert _run(suites, tmp_path / "fit1", *fit, "--task", "1") == 0
+    assert main(["report", "--runs", str(tmp_path / "fit1"), "--out", str(tmp_path / "r1")]) == 0
+    assert "⚠ WARNINGS" not in (tmp_path / "r1" / "report.md").read_text()
     with sqlite3.connect(out / STORE_NAME) as db:
         rows = db.execute(
             "SELECT method, COUNT(*), SUM(success_once), GROUP_CONCAT(DISTINCT task) "

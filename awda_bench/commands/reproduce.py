@@ -61,6 +61,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--out", type=Path, default=None, help="directory (default runs/reproduce-SUITE-RECIPE)"
     )
     parser.add_argument("--dry-run", action="store_true", help="print the plan and stop")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars in stages")
     return parser
 
 
@@ -81,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
         threads=args.threads,
         fit_check=not args.no_fit_check,
         dry_run=args.dry_run,
+        progress=not args.no_progress,
     )
     stages = plan_stages(config)
     print(format_plan(config, stages), flush=True)

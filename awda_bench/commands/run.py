@@ -71,8 +71,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--split",
         choices=EVAL_SPLITS,
         default=EVAL_SPLITS[0],
-        help="test: the held-out tasks (the protocol, default); train: the training tasks, to "
-        "tell a low held-out number from a failure to fit",
+        help="test: the held-out tasks (the protocol, default); train: the training tasks (with "
+        "--task: just those), to tell a low held-out number from a failure to fit",
     )
     parser.add_argument(
         "--snapshots", type=int, default=10, help="evaluate the last N snapshots (default 10)"

@@ -165,12 +165,24 @@ def sweep_method(config: SweepConfig) -> MethodSpec:
     return replace(method, name=label)
 
 
-def prepare_sweep(config: SweepConfig) -> SweepPlan:
-    """Validate the whole sweep; raises a one-line error on bad input and writes nothing."""
-    suite = load_suite(config.suite, config.suites_dir)
+def sweep_protocol(config: SweepConfig, suite: Suite) -> EvalProtocol:
+    """The protocol of ``config``: the held-out tasks, or (``split="train"``) the training tasks,
+    or just those of ``config.tasks`` among them (a fit check on a few training tasks is a protocol
+    of its own, so its report expects exactly those episodes)."""
     protocol = make_protocol(
         suite, episodes=config.episodes, base_seed=config.seed, split=config.split
     )
+    if config.split == "train" and config.tasks:
+        chosen = tuple(t for t in protocol.eval_tasks if t in config.tasks)
+        if chosen:
+            protocol = replace(protocol, eval_tasks=chosen)
+    return protocol
+
+
+def prepare_sweep(config: SweepConfig) -> SweepPlan:
+    """Validate the whole sweep; raises a one-line error on bad input and writes nothing."""
+    suite = load_suite(config.suite, config.suites_dir)
+    protocol = sweep_protocol(config, suite)
     specs = build_episode_specs(suite, protocol)
     for task in config.tasks:
         if task not in protocol.eval_tasks:

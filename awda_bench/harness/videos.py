@@ -20,11 +20,10 @@ from typing import Any
 import numpy as np
 
 from awda_bench.harness.episode_record import EpisodeRecord
-from awda_bench.harness.episode_specs import make_protocol
 from awda_bench.harness.figures import fig_s5, project_points, write_mp4, write_png
 from awda_bench.harness.methods import resolve, select_snapshots
 from awda_bench.harness.results_store import ResultsStore
-from awda_bench.harness.sweep import SweepConfig, sweep_method
+from awda_bench.harness.sweep import SweepConfig, sweep_method, sweep_protocol
 from awda_bench.harness.worker_pool import EpisodeExecutor, Job, WorkerConfig
 from awda_bench.policies.base import EpisodeSpec
 from awda_bench.suites import Suite, load_suite
@@ -103,9 +102,7 @@ def record_videos(
     frames of Fig. S5 images; ``None`` draws the agent's frame alone.
     """
     suite = load_suite(config.suite, config.suites_dir)
-    protocol = make_protocol(
-        suite, episodes=config.episodes, base_seed=config.seed, split=config.split
-    )
+    protocol = sweep_protocol(config, suite)
     method = sweep_method(config)
     snapshots = select_snapshots(method, config.checkpoints, config.snapshots)
     demo_frames = None if demo_source is None else resolve(demo_source, what="demo frame source")
