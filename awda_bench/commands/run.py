@@ -179,7 +179,7 @@ def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
     result = run_sweep(config)
     print(
-        f"{config.suite}/{config.method}: {result.planned} episodes planned, "
+        f"{config.suite}/{config.label or config.method}: {result.planned} episodes planned, "
         f"{result.skipped} already done, "
         f"{result.ran} played ({result.errors} errors) in {result.wall_time_s:.1f} s; "
         f"store {config.out / STORE_NAME}"
