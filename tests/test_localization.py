@@ -210,7 +210,11 @@ def test_waypoint_picks_the_off_centre_object_it_points_at() -> None:
     assert by_centre is not None and np.linalg.norm(by_centre.position_world[:2]) < 0.005
     by_waypoint = _guided(cam, [centre_obj, other], [0.085, 0.045, 0.05])
     assert by_waypoint is not None and by_waypoint.n_proposals == 2
-    assert np.linalg.norm(by_waypoint.position_world - [0.09, 0.05, 0.06]) < 0.005
+    # grasped where the waypoint points, at the top the depth image measures there
+    assert np.linalg.norm(by_waypoint.position_world - [0.085, 0.045, 0.06]) < 0.003
+    # a waypoint far from every object does not make the grasp reach into thin air
+    far = _guided(cam, [centre_obj, other], [-0.12, 0.1, 0.0])
+    assert far is not None and np.linalg.norm(far.position_world[:2]) < 0.005
     # no waypoint given: the reference rule
     no_target = localize_object(
         CAM.render(np.array(cam), [centre_obj, other]), CAM.K, CAM.cam2world(np.array(cam)), GUIDED
@@ -253,6 +257,27 @@ def test_a_nut_is_grasped_on_its_ring_not_in_its_hole() -> None:
     assert depth[int(round(v)), int(round(u))] == pytest.approx(0.37)  # on the part, not the hole
     assert guided.position_world[2] == pytest.approx(0.03, abs=1e-4)
     assert np.linalg.norm(guided.position_world[:2] - handle_point[:2]) < 0.01
+
+
+def test_a_handle_too_low_for_the_mask_is_grasped_where_the_waypoint_says() -> None:
+    # a nut 3 cm tall with a 1 cm-high handle: the handle is below the 2 cm "object" threshold,
+    # so the mask holds the ring only; the demonstration grasped the handle
+    cam_pos = np.array([0.0, 0.0, 0.4])
+    depth = CAM.render(cam_pos, [])
+    yy, xx = np.mgrid[: CAM.height, : CAM.width]
+    r = np.hypot(xx - 80, yy - 60)
+    depth[(r > 10) & (r < 16)] = 0.37
+    depth[(np.abs(yy - 60) < 3) & (xx >= 96) & (xx < 108)] = 0.39  # handle top 1 cm high
+    K, c2w = CAM.K, CAM.cam2world(cam_pos)
+    config = LocalizationConfig(select="waypoint", above_floor_m=0.02)
+    handle_point = back_project(100, 60, 0.39, K, c2w)
+    loc = localize_object(depth, K, c2w, config, handle_point)
+    assert loc is not None and loc.n_proposals == 1  # the ring alone
+    assert np.linalg.norm(loc.position_world - handle_point) < 1e-6
+    # 20 px past the ring (beyond guide_radius_px) the waypoint is not trusted: the ring is
+    beyond = back_project(120, 60, 0.4, K, c2w)
+    loc = localize_object(depth, K, c2w, config, beyond)
+    assert loc is not None and loc.position_world[2] == pytest.approx(0.03, abs=1e-4)
 
 
 def test_select_is_validated() -> None:

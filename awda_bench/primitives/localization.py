@@ -18,8 +18,11 @@ Pure numpy + OpenCV on one image, so it is testable on synthetic depth maps::
 4. connected components of ``M`` (OpenCV), kept if ``min_area_px <= area <= max_area_px``;
 5. the component whose centroid ``(u_c, v_c)`` is nearest the image centre ``((W-1)/2, (H-1)/2)``
    (``select="centre"``, the reference); or (``select="waypoint"`` with a target) the component
-   with a pixel nearest the target's projection ``(u_t, v_t)`` into the image, and as the grasp
-   pixel its centroid if that lies on the component, else its pixel nearest ``(u_t, v_t)``;
+   with a pixel nearest the target's projection ``(u_t, v_t)`` into the image; the grasp pixel is
+   ``(u_t, v_t)`` itself, at the depth seen there, when it is within ``guide_radius_px`` of that
+   component (the waypoint says where on the part: a nut's handle, too low or thin to survive
+   the mask, is grasped where the demonstration grasped it), else the centroid if that lies on
+   the component, else the component's pixel nearest ``(u_t, v_t)`` (a ring, not its hole);
 6. back-projection of the centroid's depth ``z``::
 
        p_cam   = z * K^-1 [u_c, v_c, 1]^T
@@ -156,10 +159,20 @@ def localize_object(
         near = np.hypot(us - anchor[0], vs - anchor[1])
         label = int(labels[vs[int(np.argmin(near))], us[int(np.argmin(near))]])
     u, v = (float(c) for c in centroids[label])
-    # 6. back-project the centroid's depth
+    guided_z = None
+    if anchor is not None:
+        ua, va = int(round(anchor[0])), int(round(anchor[1]))
+        inside = 0 <= ua < W and 0 <= va < H and bool(valid[va, ua])
+        if inside and float(np.min(near)) <= config.guide_radius_px:
+            # the waypoint is on (or right beside) the part: grasp where it says, at the depth
+            # seen there (a nut's handle, too low or thin to survive the mask, is still seen)
+            u, v, guided_z = float(anchor[0]), float(anchor[1]), float(depth[va, ua])
+    # 6. back-project the grasp pixel's depth
     ui, vi = int(round(u)), int(round(v))
     on_component = 0 <= ui < W and 0 <= vi < H and labels[vi, ui] == label
-    if on_component:
+    if guided_z is not None:
+        z = guided_z
+    elif on_component:
         z = float(depth[vi, ui])
     elif anchor is not None:
         # the centroid is off the object (a ring, a U): grasp its pixel nearest the target
