@@ -203,7 +203,7 @@ def _eval_tasks(suite_name: str, hold_out: str | None) -> tuple[list[int], int]:
     from awda_bench.suites import load_suite
 
     suite = load_suite(suite_name)
-    tasks = [t for t in suite.eval_tasks]
+    tasks = list(suite.eval_tasks)
     if hold_out is not None:
         families = sorted({t.family for t in suite.tasks})
         if hold_out not in families:

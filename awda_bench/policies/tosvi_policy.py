@@ -86,6 +86,7 @@ class TosviPolicy:
         if not isinstance(model, TosviNet):
             raise CorruptFileError(f"snapshot {snapshot} did not build a TosviNet")
         model.eval()
+        self.name = loaded.arch  # "tosvi" or "tosvi-depth"
         self.model: TosviNet = model
         self.action_select = action_select
         cfg = model.config
@@ -209,18 +210,12 @@ def tosvi_mode(snapshot: str | Path) -> TosviPolicy:
 
 def tosvi_depth(snapshot: str | Path) -> TosviPolicy:
     """``tosvi-depth``: a ``tosvi-depth`` snapshot, sampled actions."""
-    policy = TosviPolicy(snapshot, "sample", arch="tosvi-depth")
-    policy.name = "tosvi-depth"
-    return policy
+    return TosviPolicy(snapshot, "sample", arch="tosvi-depth")
 
 
 def tosvi_depth_mean(snapshot: str | Path) -> TosviPolicy:
-    policy = TosviPolicy(snapshot, "mean", arch="tosvi-depth")
-    policy.name = "tosvi-depth"
-    return policy
+    return TosviPolicy(snapshot, "mean", arch="tosvi-depth")
 
 
 def tosvi_depth_mode(snapshot: str | Path) -> TosviPolicy:
-    policy = TosviPolicy(snapshot, "mode", arch="tosvi-depth")
-    policy.name = "tosvi-depth"
-    return policy
+    return TosviPolicy(snapshot, "mode", arch="tosvi-depth")
