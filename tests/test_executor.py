@@ -8,6 +8,7 @@ import pytest
 from awda_bench.errors import UsageError
 from awda_bench.primitives import ExecutorConfig, WaypointExecutor, localize_object
 from awda_bench.primitives.executor import prepare_waypoints
+from awda_bench.primitives.grasp import GraspPhase
 from awda_bench.primitives.kinematic_fake import Box, KinematicRobot
 
 
@@ -78,6 +79,79 @@ def test_pick_and_place_runs_grasp_carry_drop_in_order() -> None:
     # wrist frames only during the grasp's hover phase
     assert robot.frames == sum(p == "grasp:hover" for p in phases) + 1
     assert not ex.holding and ex.grasps == 1
+    # the carry rises 18 cm above the grasp: a pick, so the grasp lifts
+    assert ex.grasp_primitives[0].lift and "grasp:lift" in phases
+
+
+def _pull_waypoints() -> np.ndarray:
+    """Grasp a thing and lead it sideways at the grasp height (a drawer handle pulled out)."""
+    return np.array(
+        [
+            [0.45, 0.10, 0.10, 0.0],
+            [0.45, 0.10, 0.07, 1.0],  # the grasp
+            [0.35, 0.10, 0.07, 1.0],  # pulled 10 cm toward the robot, no rise
+            [0.25, 0.10, 0.065, 1.0],
+            [0.25, 0.10, 0.20, 0.0],  # release and retreat
+        ]
+    )
+
+
+def test_a_sideways_carry_after_a_grasp_is_a_slow_pull_without_lift() -> None:
+    robot, target, _ = _scene()
+    ex = WaypointExecutor(_pull_waypoints(), lambda: localize_object(*robot.depth_frame()))
+    phases = _execute(ex, robot)
+    assert [e.kind for e in ex.log] == ["move", "grasp", "pull", "pull", "drop+move"]
+    grasp = ex.grasp_primitives[0]
+    assert not grasp.lift and grasp.phase_steps[GraspPhase.LIFT] == 0
+    assert "grasp:lift" not in phases
+    # the pull commands at most pull_speed of a step per axis, and still ends on its waypoints
+    speed = ExecutorConfig().pull_speed
+    assert 0 < speed < 1
+    pull_steps = ex.log[2].steps + ex.log[3].steps
+    assert pull_steps >= int(0.20 / (speed * ExecutorConfig().motion.max_step_m))
+    assert np.linalg.norm(target.center_xy - [0.25, 0.10]) < 0.02
+    # a carry that rises at least lift_min_rise_m is a pick again
+    rising = _pull_waypoints()
+    rising[2, 2] += ExecutorConfig().lift_min_rise_m + 0.01
+    assert not WaypointExecutor(rising, lambda: None)._is_pull(1)
+    assert WaypointExecutor(_pull_waypoints(), lambda: None)._is_pull(1)
+
+
+def test_pull_actions_are_capped_at_pull_speed() -> None:
+    robot, *_ = _scene()
+    ex = WaypointExecutor(_pull_waypoints(), lambda: localize_object(*robot.depth_frame()))
+    state, caps = robot.state, []
+    for _ in range(600):
+        a = ex.step(state)
+        if ex.phase == "carry":
+            caps.append(float(np.max(np.abs(a[:3]))))
+        if ex.done:
+            break
+        state = robot.step(a)
+    assert caps and max(caps) == pytest.approx(ExecutorConfig().pull_speed)
+
+
+def test_an_episode_without_grasps_pushes_with_the_gripper_closed() -> None:
+    push = np.array([[0.45, 0.30, 0.20, 0.0], [0.45, 0.30, 0.08, 0.0], [0.30, 0.30, 0.08, 0.0]])
+    for config, sign in ((ExecutorConfig(), 1.0), (ExecutorConfig(push_closed=False), -1.0)):
+        robot, *_ = _scene()
+        ex = WaypointExecutor(push, lambda: None, config)
+        state, grips = robot.state, []
+        for _ in range(300):
+            a = ex.step(state)
+            grips.append(a[3])
+            if ex.done:
+                break
+            state = robot.step(a)
+        assert ex.done and all(np.sign(g) == sign for g in grips)
+    # with a grasp anywhere, free motions stay open (the approach must arrive open)
+    assert WaypointExecutor(_pick_place_waypoints(), lambda: None).free_grip < 0
+
+
+@pytest.mark.parametrize("bad", [0.0, -0.5, 1.5])
+def test_pull_speed_outside_0_1_is_refused(bad) -> None:
+    with pytest.raises(UsageError, match="pull_speed"):
+        ExecutorConfig(pull_speed=bad)
 
 
 def test_only_one_grasp_per_episode() -> None:
@@ -98,11 +172,12 @@ def test_only_one_grasp_per_episode() -> None:
 def test_done_executor_holds_still() -> None:
     robot, *_ = _scene()
     ex = WaypointExecutor(np.array([[0.3, 0.0, 0.34, 0.0]]), lambda: None)
+    # no grasp-attributed waypoint: a pushing episode, the gripper stays closed (push_closed)
     a = ex.step(robot.state)  # within 2 cm already: one step onto it exactly (finish_exactly)
-    assert not ex.done and np.allclose(a, [0, 0, -0.5, -1])
+    assert not ex.done and np.allclose(a, [0, 0, -0.5, 1])
     robot.step(a)
     a = ex.step(robot.state)  # there: finishes without moving
-    assert ex.done and np.allclose(a, [0, 0, 0, -1])
+    assert ex.done and np.allclose(a, [0, 0, 0, 1])
     assert ex.log[0].steps == 1 and ex.log[0].reached
 
 

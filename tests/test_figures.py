@@ -3,9 +3,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pandas as pd
+import pytest
 
 from awda_bench.harness.figures import (
     GRASP_RGB,
+    PRESS_RGB,
+    RED_BRIGHT_RGB,
+    RED_DIM_RGB,
     draw_waypoints,
     fig_s5,
     plot_success_vs_snapshot,
@@ -32,6 +36,18 @@ def test_colours_red_brighten_with_order_and_grasp_is_green() -> None:
         and reds[0] < reds[-1]
         and all(c[1] < 60 for c in (colours[0], colours[3]))
     )
+
+
+def test_press_attributed_waypoints_have_their_own_colour() -> None:
+    colours = waypoint_colours([False, False, False, True], press=[False, True, True, False])
+    assert colours[1] == colours[2] == PRESS_RGB and colours[3] == GRASP_RGB
+    assert colours[0] == waypoint_colours([False])[0]  # the one free waypoint: red as ever
+    assert PRESS_RGB not in (GRASP_RGB, RED_DIM_RGB, RED_BRIGHT_RGB)
+    frame = np.zeros((96, 128, 3), np.uint8)
+    out = draw_waypoints(frame, np.array([[20.0, 20], [100, 70]]), [False, False], press=[0, 1])
+    assert tuple(out[70, 100]) == PRESS_RGB
+    with pytest.raises(ValueError, match="press flags"):
+        waypoint_colours([False, True], press=[True])
 
 
 def test_waypoints_are_drawn_where_projected_with_their_colours() -> None:

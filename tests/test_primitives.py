@@ -45,6 +45,16 @@ def test_straight_line_action_keeps_direction_and_scales_to_unit_box() -> None:
     assert np.allclose(small, [0.5, 0.0, -0.25, 1.0])  # exact displacement when it fits one step
 
 
+def test_straight_line_action_at_reduced_speed_caps_components_and_keeps_direction() -> None:
+    a = straight_line_action(np.zeros(3), np.array([0.3, -0.1, 0.05]), 0.02, -1.0, speed=0.5)
+    assert np.max(np.abs(a[:3])) == pytest.approx(0.5)
+    assert np.allclose(np.cross(a[:3], [0.3, -0.1, 0.05]), 0.0)
+    fits = straight_line_action(np.zeros(3), np.array([0.004, 0.0, 0.0]), 0.02, 1.0, speed=0.5)
+    assert np.allclose(fits, [0.2, 0.0, 0.0, 1.0])  # within half a step: exact
+    with pytest.raises(ValueError, match="speed"):
+        FreeSpace(np.zeros(3), speed=0.0)
+
+
 def test_free_space_reaches_in_the_expected_number_of_steps_along_a_line() -> None:
     robot = KinematicRobot(tcp_pos=np.array([0.0, 0.0, 0.3]))
     target = np.array([0.2, 0.1, 0.1])

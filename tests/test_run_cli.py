@@ -306,12 +306,12 @@ def test_labels_keep_checkpoint_dirs_apart_and_split_train_evaluates_training_ta
     assert _digest(out / STORE_NAME) == before
 
 
-def test_grasp_select_folds_into_the_guided_methods(tmp_path: Path, capsys) -> None:
+def test_grasp_select_centre_folds_into_the_centre_methods(tmp_path: Path, capsys) -> None:
     import argparse
 
     from awda_bench.commands.run import add_parser, config_from_args
     from awda_bench.harness.methods import get_method
-    from awda_bench.policies.gt_waypoints import gt_waypoints_guided
+    from awda_bench.policies.gt_waypoints import GTWaypointsPolicy, gt_waypoints_centre
 
     parser = argparse.ArgumentParser()
     add_parser(parser.add_subparsers())
@@ -320,14 +320,21 @@ def test_grasp_select_folds_into_the_guided_methods(tmp_path: Path, capsys) -> N
         args = parser.parse_args(["run", "--suite", "mosaic", "--out", str(tmp_path), *extra])
         return config_from_args(args).method
 
-    assert method("--grasp-select", "centre") == "gt-waypoints"
-    assert method("--grasp-select", "waypoint") == "gt-waypoints-guided"
-    assert method("--method", "awda", "--grasp-select", "waypoint") == "awda-guided"
-    assert get_method("awda-guided").learned
-    policy = gt_waypoints_guided()
-    assert policy.config.localization.select == "waypoint" and policy.name == "gt-waypoints-guided"
-    for bad in (["--method", "scripted"], ["--num-waypoints", "3"]):
-        code = main(["run", "--suite", "mosaic", *bad, "--grasp-select", "waypoint",
+    # waypoint-guided selection is the default: the plain names
+    assert method() == method("--grasp-select", "waypoint") == "gt-waypoints"
+    assert GTWaypointsPolicy().config.localization.select == "waypoint"
+    assert method("--num-waypoints", "3", "--grasp-select", "waypoint") == "gt-waypoints-k3"
+    # the reference's centre rule is a method of its own
+    assert method("--grasp-select", "centre") == "gt-waypoints-centre"
+    assert method("--method", "awda", "--grasp-select", "centre") == "awda-centre"
+    assert get_method("awda-centre").learned and not get_method("gt-waypoints-centre").learned
+    policy = gt_waypoints_centre()
+    assert policy.config.localization.select == "centre" and policy.name == "gt-waypoints-centre"
+    for bad, select in (
+        (["--method", "scripted"], "waypoint"),
+        (["--num-waypoints", "3"], "centre"),
+    ):
+        code = main(["run", "--suite", "mosaic", *bad, "--grasp-select", select,
                      "--out", str(tmp_path / "runs")])  # fmt: skip
         err = capsys.readouterr().err.strip()
         assert code == 2 and len(err.splitlines()) == 1 and "--grasp-select" in err

@@ -14,7 +14,7 @@ from awda_bench.harness.results_store import STORE_NAME
 from awda_bench.harness.sweep import SweepConfig, run_sweep
 from awda_bench.harness.worker_pool import DEFAULT_ENV_FACTORY
 from awda_bench.policies.tosvi_policy import ACTION_SELECTS, tosvi_method_name
-from awda_bench.primitives.config import GRASP_SELECTS, GUIDED_SUFFIX
+from awda_bench.primitives.config import CENTRE_SUFFIX, GRASP_SELECTS
 from awda_bench.suites import SUITES_DIR, available_suites
 
 QUICK_EPISODES = 3
@@ -58,8 +58,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--grasp-select",
         choices=GRASP_SELECTS,
         help="gt-waypoints / awda only: which wrist-depth component the grasp primitive grasps: "
-        "centre (nearest the image centre, the reference; default) or waypoint (nearest the "
-        "grasp waypoint's projection; its own method, e.g. gt-waypoints-guided)",
+        "waypoint (nearest the grasp waypoint's projection; default) or centre (nearest the "
+        "image centre, the reference's rule; its own method, e.g. gt-waypoints-centre)",
     )
     parser.add_argument("--checkpoints", type=Path, help="snapshot directory of a learned method")
     parser.add_argument(
@@ -136,9 +136,12 @@ def _method(args: argparse.Namespace) -> str:
                 f"--grasp-select applies to --method gt-waypoints or awda, not {args.method!r}; "
                 "drop --grasp-select"
             )
-        if args.num_waypoints not in (None, 5):
-            raise UsageError("--grasp-select waypoint is offered with K = 5 waypoints only")
-        return str(args.method) + (GUIDED_SUFFIX if args.grasp_select == "waypoint" else "")
+        if args.grasp_select == "centre" and args.num_waypoints not in (None, 5):
+            raise UsageError(
+                "--grasp-select centre is offered with K = 5 waypoints only; drop --num-waypoints"
+            )
+        if args.grasp_select == "centre":
+            return str(args.method) + CENTRE_SUFFIX
     if args.num_waypoints is None:
         return str(args.method)
     if args.method != "gt-waypoints":

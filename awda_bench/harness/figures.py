@@ -2,7 +2,8 @@
 (OpenCV). Frames are plain ``(H, W, 3)`` uint8 RGB arrays; colours below are RGB.
 
 Fig. S5 convention: free-space waypoints red, brightening with their order; waypoints carrying the
-grasp attribute (the end of a grasp-attributed segment) green; consecutive waypoints joined.
+grasp attribute (the end of a grasp-attributed segment) green; consecutive waypoints joined. Our
+second attribute, pressing (not in the paper's figure), is drawn blue.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ import pandas as pd  # noqa: E402
 
 GRASP_RGB = (40, 220, 40)
 """Colour of grasp-attributed waypoints."""
+PRESS_RGB = (40, 120, 255)
+"""Colour of press-attributed waypoints (the second attribute; grasp wins if both are set)."""
 RED_DIM_RGB = (110, 0, 0)
 """Colour of the first free-space waypoint; later ones brighten towards pure red."""
 RED_BRIGHT_RGB = (255, 40, 40)
@@ -44,13 +47,22 @@ def project_points(
     return uv
 
 
-def waypoint_colours(grasp: Sequence[bool]) -> list[tuple[int, int, int]]:
-    """Per-waypoint colour: green if grasp-attributed, else red brightening with order."""
-    free = [i for i, g in enumerate(grasp) if not g]
+def waypoint_colours(
+    grasp: Sequence[bool], press: Sequence[bool] | None = None
+) -> list[tuple[int, int, int]]:
+    """Per-waypoint colour: green if grasp-attributed, blue if press-attributed, else red
+    brightening with order among the free-space waypoints."""
+    pressed = [False] * len(grasp) if press is None else [bool(p) for p in press]
+    if len(pressed) != len(grasp):
+        raise ValueError(f"{len(grasp)} grasp flags but {len(pressed)} press flags")
+    free = [i for i, g in enumerate(grasp) if not g and not pressed[i]]
     colours = []
     for i, g in enumerate(grasp):
         if g:
             colours.append(GRASP_RGB)
+            continue
+        if pressed[i]:
+            colours.append(PRESS_RGB)
             continue
         t = free.index(i) / max(1, len(free) - 1)
         r, g_, b = (
@@ -61,11 +73,15 @@ def waypoint_colours(grasp: Sequence[bool]) -> list[tuple[int, int, int]]:
 
 
 def draw_waypoints(
-    frame: np.ndarray, pixels: np.ndarray, grasp: Sequence[bool], radius_px: int = 5
+    frame: np.ndarray,
+    pixels: np.ndarray,
+    grasp: Sequence[bool],
+    radius_px: int = 5,
+    press: Sequence[bool] | None = None,
 ) -> np.ndarray:
     """A copy of ``frame`` with the waypoints (``(K, 2)`` pixels) drawn in order."""
     out = np.ascontiguousarray(frame, dtype=np.uint8).copy()
-    colours = waypoint_colours(grasp)
+    colours = waypoint_colours(grasp, press)
     pts = [
         None if np.isnan(p).any() else (int(round(p[0])), int(round(p[1])))
         for p in np.asarray(pixels, float)
@@ -91,10 +107,11 @@ def fig_s5(
     agent_frame: np.ndarray,
     pixels: np.ndarray,
     grasp: Sequence[bool],
+    press: Sequence[bool] | None = None,
 ) -> np.ndarray:
     """Demo frames in a row (scaled to half the agent frame's height, wrapped), then the agent's
     first frame with the waypoints drawn; returns one RGB image."""
-    agent = draw_waypoints(agent_frame, pixels, grasp)
+    agent = draw_waypoints(agent_frame, pixels, grasp, press=press)
     h, w = agent.shape[:2]
     thumbs = [_fit_height(np.asarray(f, np.uint8), h // 2) for f in demo_frames]
     per_row = max(1, len(thumbs) // 2 + len(thumbs) % 2)

@@ -184,17 +184,17 @@ for _spec in (
         description="learned: AWDA waypoint network snapshots (--checkpoints DIR) + motor primitives",
     ),
     MethodSpec(
-        "gt-waypoints-guided",
-        "awda_bench.policies.gt_waypoints:gt_waypoints_guided",
-        description="gt-waypoints, grasps pick the depth component the waypoint points at "
-        "(--grasp-select waypoint)",
+        "gt-waypoints-centre",
+        "awda_bench.policies.gt_waypoints:gt_waypoints_centre",
+        description="gt-waypoints, grasps take the depth component nearest the image centre "
+        "(the reference's rule; --grasp-select centre)",
     ),
     MethodSpec(
-        "awda-guided",
-        "awda_bench.policies.awda_policy:awda_guided",
+        "awda-centre",
+        "awda_bench.policies.awda_policy:awda_centre",
         learned=True,
-        description="awda, grasps pick the depth component the predicted waypoint points at "
-        "(--grasp-select waypoint)",
+        description="awda, grasps take the depth component nearest the image centre "
+        "(the reference's rule; --grasp-select centre)",
     ),
     MethodSpec(
         "tosvi",

@@ -171,8 +171,10 @@ def _waypoint_figure(
     wp = np.asarray(waypoints, dtype=float)
     pixels = project_points(wp[:, :3], params["intrinsic_cv"], params["extrinsic_cv"])
     grasp = [bool(g > 0.5) for g in wp[:, 3]] if wp.shape[1] > 3 else [False] * len(wp)
+    press = [bool(p > 0.5) for p in wp[:, 4]] if wp.shape[1] > 4 else None
     png = write_png(
-        fig_s5(demo, first_frame, pixels, grasp), stem.with_name(stem.name + "_waypoints.png")
+        fig_s5(demo, first_frame, pixels, grasp, press),
+        stem.with_name(stem.name + "_waypoints.png"),
     )
     js = stem.with_name(stem.name + "_waypoints.json")
     js.write_text(json.dumps(waypoints))

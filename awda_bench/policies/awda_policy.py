@@ -26,7 +26,7 @@ from awda_bench.errors import CorruptFileError
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.policies.base import EpisodeContext
 from awda_bench.policies.gt_waypoints import robot_states
-from awda_bench.primitives.config import ExecutorConfig, LocalizationConfig
+from awda_bench.primitives.config import CENTRE_SUFFIX, ExecutorConfig, LocalizationConfig
 from awda_bench.primitives.executor import WaypointExecutor
 from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION, WristLocator
 
@@ -137,12 +137,13 @@ class AWDAPolicy:
         return self._waypoints
 
 
-def awda_guided(snapshot: str | Path) -> AWDAPolicy:
-    """``awda`` whose grasps pick the depth component the predicted grasp waypoint points at."""
+def awda_centre(snapshot: str | Path) -> AWDAPolicy:
+    """``awda`` whose grasps take the depth component nearest the wrist image's centre (the
+    reference's rule; ``awda`` follows the predicted grasp waypoint)."""
     from dataclasses import replace
 
     policy = AWDAPolicy(
-        snapshot, AWDAPolicyConfig(localization=replace(WRIST_LOCALIZATION, select="waypoint"))
+        snapshot, AWDAPolicyConfig(localization=replace(WRIST_LOCALIZATION, select="centre"))
     )
-    policy.name = "awda-guided"
+    policy.name = "awda" + CENTRE_SUFFIX
     return policy

@@ -26,7 +26,7 @@ import torch
 from awda_bench.mining import GraspMiningConfig, PressMiningConfig, mine_grasp, mine_press
 from awda_bench.policies.base import EpisodeContext, EpisodeSpec, Policy
 from awda_bench.primitives.base import RobotState
-from awda_bench.primitives.config import GUIDED_SUFFIX, ExecutorConfig, LocalizationConfig
+from awda_bench.primitives.config import CENTRE_SUFFIX, ExecutorConfig, LocalizationConfig
 from awda_bench.primitives.executor import WaypointExecutor
 from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION, WristLocator
 from awda_bench.trajectory import Trajectory
@@ -246,11 +246,12 @@ def gt_waypoints_k8() -> GTWaypointsPolicy:
     return policy
 
 
-def gt_waypoints_guided() -> GTWaypointsPolicy:
-    """``gt-waypoints`` whose grasps pick the depth component the grasp waypoint points at."""
+def gt_waypoints_centre() -> GTWaypointsPolicy:
+    """``gt-waypoints`` whose grasps take the depth component nearest the wrist image's centre
+    (the reference's rule; ``gt-waypoints`` follows the grasp waypoint)."""
     from dataclasses import replace
 
-    config = GTWaypointsConfig(localization=replace(WRIST_LOCALIZATION, select="waypoint"))
+    config = GTWaypointsConfig(localization=replace(WRIST_LOCALIZATION, select="centre"))
     policy = GTWaypointsPolicy(config)
-    policy.name = "gt-waypoints" + GUIDED_SUFFIX
+    policy.name = "gt-waypoints" + CENTRE_SUFFIX
     return policy

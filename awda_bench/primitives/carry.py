@@ -10,7 +10,10 @@ from awda_bench.primitives.free_space import FreeSpace
 
 
 class Carry(FreeSpace):
-    """:class:`FreeSpace` towards ``target`` with the close command held every step."""
+    """:class:`FreeSpace` towards ``target`` with the close command held every step (``speed``: a
+    fraction of a full step, e.g. a slower pull of an articulated handle)."""
 
-    def __init__(self, target: np.ndarray, config: FreeSpaceConfig = FreeSpaceConfig()) -> None:
-        super().__init__(target, config, grip=GRIP_CLOSE)
+    def __init__(
+        self, target: np.ndarray, config: FreeSpaceConfig = FreeSpaceConfig(), speed: float = 1.0
+    ) -> None:
+        super().__init__(target, config, grip=GRIP_CLOSE, speed=speed)

@@ -76,11 +76,13 @@ class DropConfig:
         _require_non_negative(self, "settle_steps")
 
 
-GRASP_SELECTS: tuple[str, ...] = ("centre", "waypoint")
-"""``--grasp-select`` values: how the grasp primitive picks the depth component to grasp."""
+GRASP_SELECTS: tuple[str, ...] = ("waypoint", "centre")
+"""``--grasp-select`` values: how the grasp primitive picks the depth component to grasp
+(``waypoint``, the default of the simulated wrist camera, or ``centre``, the reference's rule)."""
 
-GUIDED_SUFFIX = "-guided"
-"""Method-name suffix of waypoint-guided grasp selection (``run --grasp-select waypoint``)."""
+CENTRE_SUFFIX = "-centre"
+"""Method-name suffix of the reference's centre rule (``run --grasp-select centre``): e.g.
+``gt-waypoints-centre`` beside ``gt-waypoints`` (waypoint-guided, the default)."""
 
 
 @dataclass(frozen=True)
@@ -286,9 +288,29 @@ class ExecutorConfig:
     """The press run at a press-attributed waypoint (attribute 1), when present."""
     max_grasps: int = 1
     """Grasp attempts per episode (reference: one)."""
+    lift_min_rise_m: float = 0.03
+    """The grasp lifts (the reference's 15 cm) only when the next waypoint, a carry, lies at least
+    this much [m] above the grasp waypoint. Otherwise the demonstration moved the grasped thing
+    sideways -- a drawer or door handle pulled along its slide or arc -- and the carry starts from
+    where the gripper closed: a lift there slid the pads up and off the fixed handle (door open
+    and drawer open 0/20 with gt-waypoints). Measured on the demonstrations' K = 5 waypoints:
+    door and drawer -0.5 cm, stack block +9 cm, pick-place +10 cm, nut +12 cm, basketball +21 cm."""
+    pull_speed: float = 0.5
+    """Carry speed after a grasp without lift (a pull), as a fraction of a full step: the articulation
+    follows the hand through the pads' friction only, and a full-speed pull slips out of them (the
+    drawer expert leads its handle by 1.2 cm per step for the same reason)."""
+    push_closed: bool = True
+    """In an episode without any grasp-attributed waypoint, free-space motions keep the gripper
+    closed instead of open: such demonstrations push (a drawer shut), and open fingers straddle the
+    handle and push nothing until the drawer front meets them (drawer close 0/20 with the open
+    hand, the drawer left 1-2 cm out). An episode with a grasp approaches open, as the reference."""
 
     def __post_init__(self) -> None:
-        _require_non_negative(self, "pregrasp_raise_m", "max_grasps")
+        _require_non_negative(self, "pregrasp_raise_m", "max_grasps", "lift_min_rise_m")
+        if not 0.0 < self.pull_speed <= 1.0:
+            raise UsageError(
+                f"ExecutorConfig.pull_speed must be in (0, 1], got {self.pull_speed!r}"
+            )
 
 
 def describe(config: object) -> dict[str, object]:

@@ -19,6 +19,10 @@ Waypoint ``i`` is handled, in order, by::
 
 Before execution, the waypoint preceding the first grasp-attributed waypoint is raised by
 ``pregrasp_raise_m`` (15 cm), so the approach ends above the object, where the wrist camera sees it.
+Two readings of the waypoints the reference does not make (:class:`ExecutorConfig`): a grasp whose
+next waypoint carries sideways (rises less than ``lift_min_rise_m``) is a *pull* -- no lift, and the
+carry runs at ``pull_speed`` -- and an episode without any grasp-attributed waypoint moves with the
+gripper closed (``push_closed``: it pushes).
 A motion counts as reached within ``reach_tol_m`` (2 cm) or ends after its step budget. "Holding" is
 the executor's belief (set by a completed grasp, cleared by a drop), not simulator truth.
 
@@ -49,7 +53,8 @@ class WaypointLog:
 
     index: int
     kind: str
-    """``"move"``, ``"carry"``, ``"grasp"``, ``"drop+move"``, ``"press"`` or ``"press (held)"``."""
+    """``"move"``, ``"carry"``, ``"pull"`` (a carry after a grasp without lift), ``"grasp"``,
+    ``"drop+move"``, ``"press"`` or ``"press (held)"``."""
     steps: int = 0
     """Control steps spent on this waypoint."""
     reached: bool | None = None
@@ -94,6 +99,12 @@ class WaypointExecutor:
         self.done = False
         self.grasp_primitives: list[Grasp] = []
         self.press_primitives: list[Press] = []
+        self.free_grip = (
+            GRIP_CLOSE
+            if config.push_closed and not np.any(self.waypoints[:, 3] > 0.5)
+            else GRIP_OPEN
+        )
+        """Gripper command of free-space motions (closed in an episode that only pushes)."""
         self._gen = self._run()
         next(self._gen)  # advance to the first ``yield`` (waits for a state)
 
@@ -120,7 +131,7 @@ class WaypointExecutor:
         return self._gen.send(state)
 
     def _idle(self) -> np.ndarray:
-        return hold_action(GRIP_CLOSE if self.holding else GRIP_OPEN)
+        return hold_action(GRIP_CLOSE if self.holding else self.free_grip)
 
     def _run_primitive(
         self, primitive: Primitive, entry: WaypointLog, state: RobotState
@@ -131,10 +142,19 @@ class WaypointExecutor:
             state = yield action
         return state
 
+    def _is_pull(self, i: int) -> bool:
+        """The grasp at waypoint ``i`` is a pull: its next waypoint is a carry that rises less than
+        ``lift_min_rise_m`` above it (a handle led sideways along its slide or arc)."""
+        W = self.waypoints
+        if i + 1 >= len(W) or not W[i + 1, 3] > 0.5:
+            return False
+        return bool(W[i + 1, 2] - W[i, 2] < self.config.lift_min_rise_m)
+
     def _run(self) -> Generator[np.ndarray, RobotState, None]:
         c = self.config
         state: RobotState = yield hold_action(GRIP_OPEN)  # primed by __init__; value discarded
         pressed_last = False
+        pulling = False
         for i, wp in enumerate(self.waypoints):
             target = wp[:3]
             grasp_flag = bool(wp[3] > 0.5)
@@ -157,16 +177,23 @@ class WaypointExecutor:
                 self.log.append(entry)
                 if hasattr(self.locate, "target_world"):
                     self.locate.target_world = np.asarray(target, dtype=np.float64)  # the guide
-                grasp = Grasp(self.locate, c.grasp, c.motion.max_step_m, fallback_tcp_target=target)
+                pulling = self._is_pull(i)
+                grasp = Grasp(
+                    self.locate,
+                    c.grasp,
+                    c.motion.max_step_m,
+                    fallback_tcp_target=target,
+                    lift=not pulling,
+                )
                 self.grasp_primitives.append(grasp)
                 state = yield from self._run_primitive(grasp, entry, state)
                 self.grasps += 1
                 self.holding = not grasp.failed
                 continue
             if grasp_flag and self.holding:
-                entry = WaypointLog(i, "carry")
+                entry = WaypointLog(i, "pull" if pulling else "carry")
                 self.log.append(entry)
-                motion: FreeSpace = Carry(target, c.motion)
+                motion: FreeSpace = Carry(target, c.motion, speed=c.pull_speed if pulling else 1.0)
             else:
                 entry = WaypointLog(i, "move")
                 self.log.append(entry)
@@ -174,7 +201,8 @@ class WaypointExecutor:
                     entry.kind = "drop+move"
                     state = yield from self._run_primitive(Drop(c.drop), entry, state)
                     self.holding = False
-                motion = FreeSpace(target, c.motion, grip=GRIP_OPEN)
+                    pulling = False
+                motion = FreeSpace(target, c.motion, grip=self.free_grip)
             state = yield from self._run_primitive(motion, entry, state)
             entry.reached = motion.reached
         self.done = True

@@ -9,19 +9,24 @@ from awda_bench.primitives.config import FreeSpaceConfig
 
 
 def straight_line_action(
-    tcp_pos: np.ndarray, target: np.ndarray, max_step_m: float, grip: float
+    tcp_pos: np.ndarray,
+    target: np.ndarray,
+    max_step_m: float,
+    grip: float,
+    speed: float = 1.0,
 ) -> np.ndarray:
     """The action moving the TCP straight towards ``target``.
 
-    With ``d = target - tcp_pos`` [m] and ``s = max_step_m`` (displacement per unit action)::
+    With ``d = target - tcp_pos`` [m], ``s = max_step_m`` (displacement per unit action) and
+    ``v = speed`` (fraction of a full step, in (0, 1])::
 
-        a_xyz = (d / s) / max(1, ||d / s||_inf)
+        a_xyz = (d / s) * v / max(v, ||d / s||_inf)
 
-    so the commanded displacement is exactly ``d`` when it fits in one step, otherwise the largest
-    step along ``d`` whose components all lie in [-1, 1] (the direction is preserved).
+    so the commanded displacement is exactly ``d`` when it fits in ``v`` of a step, otherwise the
+    largest step along ``d`` whose components all lie in [-v, v] (the direction is preserved).
     """
     a = (np.asarray(target, dtype=np.float64) - np.asarray(tcp_pos, dtype=np.float64)) / max_step_m
-    a = a / max(1.0, float(np.max(np.abs(a))))
+    a = a * (speed / max(speed, float(np.max(np.abs(a)))))
     return np.array([a[0], a[1], a[2], grip], dtype=np.float64)
 
 
@@ -29,7 +34,8 @@ class FreeSpace:
     """Move the TCP to ``target`` in a straight line with a fixed gripper command.
 
     Finishes when ``||p - target|| < reach_tol_m`` (then, with ``finish_exactly``, after one more
-    step commanding the exact remaining displacement) or after ``step_budget`` actions.
+    step commanding the exact remaining displacement) or after ``step_budget`` actions. ``speed``
+    (fraction of a full step, in (0, 1]) caps every command component.
     """
 
     def __init__(
@@ -37,10 +43,14 @@ class FreeSpace:
         target: np.ndarray,
         config: FreeSpaceConfig = FreeSpaceConfig(),
         grip: float = GRIP_OPEN,
+        speed: float = 1.0,
     ) -> None:
+        if not 0.0 < speed <= 1.0:
+            raise ValueError(f"speed must be in (0, 1], got {speed!r}")
         self.target = np.asarray(target, dtype=np.float64).reshape(3)
         self.config = config
         self.grip = float(grip)
+        self.speed = float(speed)
         self.steps = 0
         """Actions issued so far."""
         self.reached = False
@@ -59,12 +69,14 @@ class FreeSpace:
                 return None
             self.steps += 1
             return straight_line_action(
-                state.tcp_pos, self.target, self.config.max_step_m, self.grip
+                state.tcp_pos, self.target, self.config.max_step_m, self.grip, self.speed
             )
         if self.steps >= self.config.step_budget:
             return None
         self.steps += 1
-        return straight_line_action(state.tcp_pos, self.target, self.config.max_step_m, self.grip)
+        return straight_line_action(
+            state.tcp_pos, self.target, self.config.max_step_m, self.grip, self.speed
+        )
 
 
 __all__ = ["FreeSpace", "straight_line_action"]

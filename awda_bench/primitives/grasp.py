@@ -7,6 +7,8 @@ Timeline in control steps (each phase ends on its tolerance or its step budget):
     CLOSE    hold position, close command, close_steps steps
     LIFT     move to p_close + (0, 0, lift_m), the first lift_probe_m slowly;     gripper closed
              blocked there (fixed or articulated object) -> the lift ends early
+             (skipped with ``lift=False``: the executor's choice when the next waypoint
+             carries the grasped thing sideways, i.e. pulls a handle)
     DONE
 
 ``z_top`` is the localized (visible top) z of the object. The localizer is injected as a callable
@@ -48,6 +50,7 @@ class Grasp:
         config: heights, offsets, tolerances and budgets.
         max_step_m: TCP displacement per unit action [m] (the controller's step).
         fallback_tcp_target: (3,) TCP grasp position [m] used if localization never succeeds.
+        lift: False ends the grasp once the gripper has closed (no LIFT phase).
     """
 
     def __init__(
@@ -56,8 +59,10 @@ class Grasp:
         config: GraspConfig = GraspConfig(),
         max_step_m: float = 0.02,
         fallback_tcp_target: np.ndarray | None = None,
+        lift: bool = True,
     ) -> None:
         self.locate = locate
+        self.lift = lift
         self.config = config
         self.max_step_m = max_step_m
         self.fallback = (
@@ -145,6 +150,9 @@ class Grasp:
                     continue
                 return self._move(state, self._descent_target, GRIP_OPEN)
             if self.phase is GraspPhase.CLOSE:
+                if self.phase_steps[GraspPhase.CLOSE] >= c.close_steps and not self.lift:
+                    self.phase = GraspPhase.DONE
+                    continue
                 if self.phase_steps[GraspPhase.CLOSE] >= c.close_steps:
                     self.phase = GraspPhase.LIFT
                     self._lift_target = np.asarray(state.tcp_pos, float) + np.array(
