@@ -150,6 +150,23 @@ def test_grasp_localizes_hovers_descends_closes_and_lifts(offset_xy) -> None:
     assert robot.frames == grasp.localizations == grasp.phase_steps[GraspPhase.HOVER] + 1
 
 
+def test_a_blocked_descent_closes_at_once_instead_of_pushing_out_its_budget() -> None:
+    # the target lies 5 cm under the support the fingertips stop on (the fake's floor, z = 0)
+    robot = KinematicRobot(tcp_pos=np.array([0.0, 0.0, 0.1]))
+    cfg = GraspConfig()
+    grasp = Grasp(lambda: None, cfg, fallback_tcp_target=np.array([0.0, 0.0, -0.05]))
+    trace = []
+    state = robot.state
+    while (a := grasp.step(state)) is not None:
+        state = robot.step(a)
+        trace.append((grasp.phase, float(state.tcp_pos[2])))
+    descent = grasp.phase_steps[GraspPhase.DESCEND]
+    on_floor = sum(1 for p, z in trace if p is GraspPhase.DESCEND and z == 0.0)
+    assert descent < cfg.descend_step_budget
+    assert on_floor == cfg.lift_blocked_steps  # closes after the blocked steps, not the budget
+    assert grasp.phase_steps[GraspPhase.CLOSE] == cfg.close_steps
+
+
 def test_grasp_of_a_flat_object_keeps_clear_of_the_floor() -> None:
     box = Box(center_xy=np.array([0.0, 0.0]), size=np.array([0.05, 0.05, 0.02]))
     robot = KinematicRobot(tcp_pos=np.array([0.0, 0.0, 0.3]), boxes=[box])

@@ -4,6 +4,7 @@ Timeline in control steps (each phase ends on its tolerance or its step budget):
 
     HOVER    re-localize every step; move to  top + (0, 0, hover_height_m)        gripper open
     DESCEND  move to (x, y, max(z_top - descent_offset_m, z_floor + clearance))  gripper open
+             (within descend_tol_m, or blocked: the fingertips on the support)
     CLOSE    hold position, close command, close_steps steps
     LIFT     move to p_close + (0, 0, lift_m), the first lift_probe_m slowly;     gripper closed
              blocked there (fixed or articulated object) -> the lift ends early
@@ -88,6 +89,9 @@ class Grasp:
         """(TCP, commanded displacement [m]) of the last lift step."""
         self._lift_blocked_steps = 0
         self.lift_blocked = False
+        self._descend_last: tuple[np.ndarray, np.ndarray] | None = None
+        """(TCP, commanded displacement [m]) of the last descent step."""
+        self._descend_blocked_steps = 0
         """True when the lift ended because the grasped thing did not rise (fixed/articulated)."""
 
     # -- helpers -------------------------------------------------------------------------------
@@ -142,13 +146,27 @@ class Grasp:
                 if self._descent_target is None:
                     self._descent_target = self.descent_target()
                     assert self._descent_target is not None  # HOVER ends only with a target
+                tcp = np.asarray(state.tcp_pos, dtype=np.float64)
+                if self._descend_last is not None and is_blocked(
+                    self._descend_last[0],
+                    tcp,
+                    self._descend_last[1],
+                    c.lift_min_command_m,
+                    c.lift_progress_ratio,
+                ):
+                    self._descend_blocked_steps += 1
+                else:
+                    self._descend_blocked_steps = 0
                 if (
-                    np.linalg.norm(self._descent_target - state.tcp_pos) < c.descend_tol_m
+                    np.linalg.norm(self._descent_target - tcp) < c.descend_tol_m
+                    or self._descend_blocked_steps >= c.lift_blocked_steps
                     or self.phase_steps[GraspPhase.DESCEND] >= c.descend_step_budget
                 ):
                     self.phase = GraspPhase.CLOSE
                     continue
-                return self._move(state, self._descent_target, GRIP_OPEN)
+                action = self._move(state, self._descent_target, GRIP_OPEN)
+                self._descend_last = (tcp, action[:3] * self.max_step_m)
+                return action
             if self.phase is GraspPhase.CLOSE:
                 if self.phase_steps[GraspPhase.CLOSE] >= c.close_steps and not self.lift:
                     self.phase = GraspPhase.DONE
