@@ -123,10 +123,12 @@ class LocalizationConfig:
     is) and grasps at that projection when it is within ``guide_radius_px`` of the component (at
     the depth seen there), else at the centroid if that lies on the component, else at its pixel
     nearest the projection (a nut's ring, not its hole). Without a waypoint, ``"waypoint"``
-    behaves like ``"centre"``. Measured on MOSAIC gt-waypoints (20 episodes per family): nut
-    assembly 0.00 -> 0.90 (the nut's handle is 1 cm high, under the 2 cm object threshold, so
-    the centre rule grasped the ring 2-3 cm from where the demonstration held the nut and the
-    nut landed beside its peg), drawer 0.05 -> 0.00, door 0.50 -> 0.50, the others 1.00."""
+    behaves like ``"centre"``. Measured on MOSAIC gt-waypoints (20 episodes per family, final
+    executor): centre -> waypoint nut assembly 0.00 -> 0.95 (the nut's handle is 1 cm high,
+    under the 2 cm object threshold, so the centre rule grasped the ring 2-3 cm from where the
+    demonstration held the nut and the nut landed beside its peg), drawer 0.70 -> 1.00, the
+    others 1.00 both; pick-place 0.97 -> 1.00. The simulator's wrist camera uses "waypoint"
+    (:data:`~awda_bench.primitives.wrist_camera.WRIST_LOCALIZATION`)."""
 
     guide_radius_px: float = 12.0
     """``select="waypoint"``: when the waypoint's projection is within this many pixels of the
