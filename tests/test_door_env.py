@@ -195,7 +195,7 @@ def _run_expert(env, task: int, seed: int, horizon: int = 200) -> tuple[bool, se
 def test_expert_succeeds_on_the_agent(env, task: int, seed: int) -> None:
     success, seen = _run_expert(env, task, seed)
     assert success
-    assert ("grasp" if task % 2 == 0 else "press") in seen
+    assert ("grasp" if task % 2 == 0 else "push") in seen
 
 
 @pytest.mark.slow
@@ -210,3 +210,23 @@ def test_expert_succeeds_on_the_demonstrator() -> None:
         assert _run_expert(e, 1, 4)[0]
     finally:
         e.close()
+
+
+def test_hand_holds_a_handle_it_drags_with_one_finger_but_not_one_it_pushes_or_touches() -> None:
+    from awda_bench.envs.articulated import HOLD_MIN_FORCE_N, hand_holds
+
+    strong = 10 * HOLD_MIN_FORCE_N
+    cases = [  # (ManiSkill two-finger test, finger forces [N], opening [m]) -> holds
+        ((True, (strong, strong), 0.016), True),
+        (
+            (False, (0.0, strong), 0.020),
+            True,
+        ),  # dragging along the arc: the trailing finger lost contact
+        ((False, (0.0, strong), 0.007), False),  # closed fingers pushing a panel
+        ((False, (strong, 0.0), 0.08), False),  # an open hand bumping into the handle
+        ((False, (0.0, 0.5 * HOLD_MIN_FORCE_N), 0.02), False),  # a light touch
+    ]
+    grasping = torch.tensor([c[0][0] for c in cases])
+    forces = torch.tensor([c[0][1] for c in cases])
+    opening = torch.tensor([c[0][2] for c in cases])
+    assert hand_holds(grasping, forces, opening).tolist() == [c[1] for c in cases]

@@ -164,7 +164,7 @@ def _run_expert(env, task: int, seed: int, horizon: int = 200) -> tuple[bool, se
 def test_expert_succeeds_on_the_agent(env, task: int, seed: int) -> None:
     success, seen = _run_expert(env, task, seed)
     assert success
-    assert ("grasp" if task % 2 == 0 else "press") in seen
+    assert ("grasp" if task % 2 == 0 else "push") in seen
 
 
 @pytest.mark.slow

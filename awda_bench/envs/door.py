@@ -13,6 +13,7 @@ from awda_bench.envs.articulated import (
     DoorCabinetSpec,
     PlacementNoise,
     build_door_cabinet,
+    hand_holds,
     rotate_z,
     sample_placements,
     yaw_quat,
@@ -215,12 +216,15 @@ class DoorEnv(AWDATaskEnv):
         return forces[0], forces[1]
 
     def is_grasping_target(self) -> torch.Tensor:
-        """(n,) both fingers hold the target door (its handle), ManiSkill's contact-force test."""
+        """(n,) the hand holds the target door's handle (:func:`~.articulated.hand_holds`: both
+        fingers on it, or the closed hand dragging it along the arc)."""
         door = self.target_door
-        out = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+        both = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
         for j, link in enumerate(self.door_links):
-            out = torch.where(door == j, self.agent.is_grasping(link), out)
-        return out
+            both = torch.where(door == j, self.agent.is_grasping(link), both)
+        f1, f2 = self._target_contacts()
+        opening = self.agent.gripper_opening_m.reshape(-1)
+        return hand_holds(both, torch.stack([f1, f2], dim=1), opening)
 
     def is_pushing_target(self, min_force_n: float = 0.05) -> torch.Tensor:
         """(n,) a finger presses on the target door with >= ``min_force_n`` [N], no grasp (the
@@ -229,7 +233,10 @@ class DoorEnv(AWDATaskEnv):
         return (torch.maximum(f1, f2) >= min_force_n) & ~self.is_grasping_target()
 
     def truth_signals(self) -> dict[str, torch.Tensor]:
-        return {"grasp": self.is_grasping_target(), "press": self.is_pushing_target()}
+        """``grasp`` (scored against the mined grasp attribute) and ``push`` (a finger on the
+        door without a grasp: the swing being pushed shut, which moves -- not the pressing
+        attribute, commanded motion that does not move, so it is not scored as "press")."""
+        return {"grasp": self.is_grasping_target(), "push": self.is_pushing_target()}
 
     # ------------------------------------------------------------------ evaluation
     def _evaluate_task(self) -> dict[str, torch.Tensor]:

@@ -13,6 +13,7 @@ from awda_bench.envs.articulated import (
     DrawerCabinetSpec,
     PlacementNoise,
     build_drawer_cabinet,
+    hand_holds,
     rotate_z,
     sample_placements,
     yaw_quat,
@@ -196,30 +197,40 @@ class DrawerEnv(AWDATaskEnv):
         return self.layout.cabinets[int(self.target_drawer[i]) // 2]
 
     # ------------------------------------------------------------------ truths
-    def is_grasping_target(self) -> torch.Tensor:
-        """(n,) both fingers hold the target drawer (its handle), ManiSkill's contact-force test."""
+    def _target_contacts(self) -> torch.Tensor:
+        """(n, 2) contact force magnitudes [N] of the two fingers on each env's target drawer."""
         drawer = self.target_drawer
-        out = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+        forces = torch.zeros(self.num_envs, 2, device=self.device)
+        for j, link in enumerate(self.drawer_links):
+            if not bool((drawer == j).any()):
+                continue
+            for k, finger in enumerate((self.agent.finger1_link, self.agent.finger2_link)):
+                f = torch.linalg.norm(self.scene.get_pairwise_contact_forces(finger, link), dim=1)
+                forces[:, k] = torch.where(drawer == j, f, forces[:, k])
+        return forces
+
+    def is_grasping_target(self) -> torch.Tensor:
+        """(n,) the hand holds the target drawer's handle (:func:`~.articulated.hand_holds`: both
+        fingers on it, or the closed hand dragging it out)."""
+        drawer = self.target_drawer
+        both = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
         for j, link in enumerate(self.drawer_links):
             if bool((drawer == j).any()):
-                out = torch.where(drawer == j, self.agent.is_grasping(link), out)
-        return out
+                both = torch.where(drawer == j, self.agent.is_grasping(link), both)
+        opening = self.agent.gripper_opening_m.reshape(-1)
+        return hand_holds(both, self._target_contacts(), opening)
 
     def is_pushing_target(self, min_force_n: float = 0.05) -> torch.Tensor:
         """(n,) a finger presses on the target drawer with >= ``min_force_n`` [N], no grasp (the
         passive, damped joint resists a steady push with only a few tenths of a newton)."""
-        drawer = self.target_drawer
-        force = torch.zeros(self.num_envs, device=self.device)
-        for j, link in enumerate(self.drawer_links):
-            if not bool((drawer == j).any()):
-                continue
-            for finger in (self.agent.finger1_link, self.agent.finger2_link):
-                f = torch.linalg.norm(self.scene.get_pairwise_contact_forces(finger, link), dim=1)
-                force = torch.where(drawer == j, torch.maximum(force, f), force)
+        force = self._target_contacts().max(dim=1).values
         return (force >= min_force_n) & ~self.is_grasping_target()
 
     def truth_signals(self) -> dict[str, torch.Tensor]:
-        return {"grasp": self.is_grasping_target(), "press": self.is_pushing_target()}
+        """``grasp`` (scored against the mined grasp attribute) and ``push`` (a finger on the
+        drawer without a grasp: the drawer being pushed shut, which moves -- not the pressing
+        attribute, commanded motion that does not move, so it is not scored as "press")."""
+        return {"grasp": self.is_grasping_target(), "push": self.is_pushing_target()}
 
     # ------------------------------------------------------------------ evaluation
     def _evaluate_task(self) -> dict[str, torch.Tensor]:
