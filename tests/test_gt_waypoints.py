@@ -55,14 +55,18 @@ def _run(env, policy, task: int, seed: int, horizon: int = 200):
 
 @pytest.mark.slow
 def test_gt_waypoints_plans_restores_the_start_and_succeeds(pick_place_env) -> None:
-    from awda_bench.policies.gt_waypoints import GTWaypointsPolicy, episode_spec_for
+    from awda_bench.policies.gt_waypoints import (
+        GTWaypointsConfig,
+        GTWaypointsPolicy,
+        episode_spec_for,
+    )
 
     env = pick_place_env
     base = env.unwrapped
     env.reset(seed=123, options={"task": 14})
     qpos0 = base.agent.robot.get_qpos().clone()
     objects0, _ = base.object_poses()
-    policy = GTWaypointsPolicy()
+    policy = GTWaypointsPolicy(GTWaypointsConfig(record_truth=True))
     policy.reset(EpisodeContext(env=base, spec=episode_spec_for("pick_place", 14, 123)))
     # planning ran the expert on this very scene and put everything back
     assert float((base.agent.robot.get_qpos() - qpos0).abs().max()) < 1e-6
@@ -90,6 +94,11 @@ def test_gt_waypoints_plans_restores_the_start_and_succeeds(pick_place_env) -> N
     assert policy.stats.frames == grasp.localizations > 0
     assert grasp.localization_misses == 0
     assert policy.stats.overhead_per_step_ms < 5.0  # generous bound for shared CI machines
+    # evaluating (the default) plans without the contact-force truth: only the miner is used
+    env.reset(seed=124, options={"task": 14})
+    plain = GTWaypointsPolicy()
+    plain.reset(EpisodeContext(env=base, spec=episode_spec_for("pick_place", 14, 124)))
+    assert plain.stats.trajectories[0].truth == {} and plain.waypoints is not None
 
 
 @pytest.mark.slow
