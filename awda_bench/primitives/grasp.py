@@ -119,6 +119,18 @@ class Grasp:
             z = max(z, self.floor_z + c.min_floor_clearance_m)
         return np.array([self.object_top[0], self.object_top[1], z])
 
+    def _count_blocked(
+        self, last: tuple[np.ndarray, np.ndarray] | None, tcp: np.ndarray, count: int
+    ) -> int:
+        """``count + 1`` if the last step's command (``last``: TCP, commanded displacement [m])
+        was blocked (the pressing condition), else 0."""
+        c = self.config
+        if last is not None and is_blocked(
+            last[0], tcp, last[1], c.lift_min_command_m, c.lift_progress_ratio
+        ):
+            return count + 1
+        return 0
+
     def _move(self, state: RobotState, target: np.ndarray, grip: float) -> np.ndarray:
         self.phase_steps[self.phase] += 1
         return straight_line_action(state.tcp_pos, target, self.max_step_m, grip)
@@ -147,16 +159,9 @@ class Grasp:
                     self._descent_target = self.descent_target()
                     assert self._descent_target is not None  # HOVER ends only with a target
                 tcp = np.asarray(state.tcp_pos, dtype=np.float64)
-                if self._descend_last is not None and is_blocked(
-                    self._descend_last[0],
-                    tcp,
-                    self._descend_last[1],
-                    c.lift_min_command_m,
-                    c.lift_progress_ratio,
-                ):
-                    self._descend_blocked_steps += 1
-                else:
-                    self._descend_blocked_steps = 0
+                self._descend_blocked_steps = self._count_blocked(
+                    self._descend_last, tcp, self._descend_blocked_steps
+                )
                 if (
                     np.linalg.norm(self._descent_target - tcp) < c.descend_tol_m
                     or self._descend_blocked_steps >= c.lift_blocked_steps
@@ -182,16 +187,9 @@ class Grasp:
             if self.phase is GraspPhase.LIFT:
                 assert self._lift_target is not None
                 tcp = np.asarray(state.tcp_pos, dtype=np.float64)
-                if self._lift_last is not None and is_blocked(
-                    self._lift_last[0],
-                    tcp,
-                    self._lift_last[1],
-                    c.lift_min_command_m,
-                    c.lift_progress_ratio,
-                ):
-                    self._lift_blocked_steps += 1
-                else:
-                    self._lift_blocked_steps = 0
+                self._lift_blocked_steps = self._count_blocked(
+                    self._lift_last, tcp, self._lift_blocked_steps
+                )
                 if self._lift_blocked_steps >= c.lift_blocked_steps:
                     self.lift_blocked = True
                     self.phase = GraspPhase.DONE
