@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from awda_bench.errors import UnknownChoiceError, UsageError
+from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION
 from awda_bench.training.columns import COLUMNS, Column
 
 SUITES: tuple[str, ...] = ("pick_place", "mosaic")
@@ -480,6 +481,8 @@ def write_summary(config: ReproduceConfig, timings: list[tuple[str, float]]) -> 
         f"| training | {recipe.train.max_steps} steps x batch {recipe.train.batch_size}, snapshot "
         f"every {recipe.train.snapshot_every_steps} | {PAPER_SCALE['steps']} |",
         f"| dataset fingerprint | `{manifest.get('fingerprint')}` | – |",
+        f"| grasp target (AWDA columns) | `{WRIST_LOCALIZATION.select}` (`run --grasp-select`) "
+        "| `centre` (nearest the wrist image's centre) |",
         f"| evaluation | last {config.snapshots} snapshots x the suite's episodes per held-out "
         f"unit | last 10 snapshots x 20 episodes |",
         "",
