@@ -297,6 +297,20 @@ def test_labels_keep_checkpoint_dirs_apart_and_split_train_evaluates_training_ta
     assert main(["report", "--runs", str(out), "--out", str(tmp_path / "rep")]) == 0
     s3 = (tmp_path / "rep" / "s3.md").read_text()
     assert "good" in s3 and "bad" in s3
+    # the held-out split with --task (one held-out family): a protocol of just those tasks,
+    # with the very episodes (seeds) the full protocol gives them
+    held = (*common, "--checkpoints", str(good), "--label", "held")
+    assert _run(suites, tmp_path / "held3", *held, "--task", "3") == 0
+    assert main(["report", "--runs", str(tmp_path / "held3"), "--out", str(tmp_path / "r3")]) == 0
+    assert "⚠ WARNINGS" not in (tmp_path / "r3" / "report.md").read_text()
+    with sqlite3.connect(tmp_path / "held3" / STORE_NAME) as db:
+        held_seeds = db.execute("SELECT task, episode, seed FROM episodes").fetchall()
+    with sqlite3.connect(out / STORE_NAME) as db:
+        full_seeds = db.execute(
+            "SELECT task, episode, seed FROM episodes WHERE method = 'good'"
+        ).fetchall()
+    assert {t for t, _, _ in held_seeds} == {3}
+    assert set(held_seeds) == {r for r in full_seeds if r[0] == 3}
     capsys.readouterr()
     # a label that is another method's name is refused before anything is written
     before = _digest(out / STORE_NAME)

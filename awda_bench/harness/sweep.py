@@ -167,12 +167,16 @@ def sweep_method(config: SweepConfig) -> MethodSpec:
 
 def sweep_protocol(config: SweepConfig, suite: Suite) -> EvalProtocol:
     """The protocol of ``config``: the held-out tasks, or (``split="train"``) the training tasks,
-    or just those of ``config.tasks`` among them (a fit check on a few training tasks is a protocol
-    of its own, so its report expects exactly those episodes)."""
+    or just those of ``config.tasks`` among them. A subset is a protocol of its own, so its
+    report expects exactly those episodes: a fit check on two training tasks, or one held-out
+    MOSAIC family (``reproduce --hold-out drawer`` evaluates the drawer tasks only; its S4 row
+    must not count the five other families as missing). The episodes of a subset are those of the
+    full protocol (same seeds; a family's variations cycle as before when all of them are
+    chosen)."""
     protocol = make_protocol(
         suite, episodes=config.episodes, base_seed=config.seed, split=config.split
     )
-    if config.split == "train" and config.tasks:
+    if config.tasks:
         chosen = tuple(t for t in protocol.eval_tasks if t in config.tasks)
         if chosen:
             protocol = replace(protocol, eval_tasks=chosen)
