@@ -140,16 +140,43 @@ def test_missing_episodes_are_flagged(tmp_path: Path) -> None:
                 progress=False,
                 command="t",
                 episodes=3,
-                tasks=(3,),
             )
         )
     finally:
         unregister_method("fake")
+    # a sweep cut short: task 3's episodes never arrived
+    with sqlite3.connect(tmp_path / "runs" / STORE_NAME) as db:
+        db.execute("DELETE FROM episodes WHERE task = 3")
     result = write_report(tmp_path / "runs", tmp_path / "rep")
     assert result.warnings == [
         "fake/fake: expected 6 episodes, recorded 3 (3 missing) — re-run the same command to finish"
     ]
     assert "MISMATCH" in (tmp_path / "rep" / "counts.md").read_text()
+
+
+def test_a_held_out_family_alone_gets_its_s4_cell_and_no_all(tmp_path: Path) -> None:
+    suites = tmp_path / "tasks"
+    suites.mkdir()
+    write_fake_suite(suites)
+    register_method(MethodSpec("fake", f"{FAKES}:SkillPolicy"))
+    try:
+        common = dict(method="fake", suites_dir=suites, workers=0, progress=False, command="t")
+        run_sweep(
+            SweepConfig(suite="fake", out=tmp_path / "runs", episodes=3, tasks=(2,), **common)
+        )
+    finally:
+        unregister_method("fake")
+    result = write_report(tmp_path / "runs", tmp_path / "rep")
+    assert result.warnings == []  # the protocol is the drawer task alone: nothing missing
+    summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
+    groups = {c["group"]: c for c in summary["cells"]}
+    assert set(groups) == {"all", "drawer"} and groups["drawer"]["episodes"] == 3
+    s4 = (tmp_path / "rep" / "s4.md").read_text().splitlines()
+    row = next(line for line in s4 if line.startswith("| fake"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    header = [c.strip() for c in s4[0].strip("|").split("|")]
+    assert cells[header.index("Drawer")] != "–" and cells[header.index("All")] == "–"
+    assert cells[header.index("Door")] == "–"
 
 
 def test_report_refuses_a_missing_store(tmp_path: Path) -> None:

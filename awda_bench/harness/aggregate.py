@@ -158,7 +158,9 @@ def all_cells(
             common = dict(suite=proto["suite"], method=method, metric=metric)
             cells.append(make_cell(rows, plan, group=ALL, **common))
             families = sorted({family_key(f) for f in rows["family"]})
-            if len(families) > 1:
+            s4_keys = {k for k, _ in S4_FAMILIES}
+            # one S4 family alone (a held-out family: reproduce --hold-out drawer) is its cell too
+            if len(families) > 1 or s4_keys.intersection(families):
                 keyed = rows["family"].map(family_key)
                 for family in families:
                     cells.append(make_cell(rows[keyed == family], plan, group=family, **common))

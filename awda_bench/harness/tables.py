@@ -44,7 +44,8 @@ def table_s3(cells: list[Cell], display_names: dict[str, str]) -> pd.DataFrame:
 
 
 def table_s4(cells: list[Cell]) -> pd.DataFrame | None:
-    """Rows = methods (per suite), columns = the six S4 families + All; ``None`` if none."""
+    """Rows = methods (per suite), columns = the six S4 families + All; ``None`` if none. A row
+    that lacks some of the six families (a held-out family evaluated alone) has no "All"."""
     keys = {k for k, _ in S4_FAMILIES}
     suites = sorted({c.suite for c in cells if c.group in keys})
     if not suites:
@@ -55,7 +56,9 @@ def table_s4(cells: list[Cell]) -> pd.DataFrame | None:
         has_subset = any(g == "s4_all" for g, _ in index)
         for method in sorted({c.method for c in cells if c.suite == suite}):
             row = [format_cell(index.get((k, method))) for k, _ in S4_FAMILIES]
-            row.append(format_cell(index.get(("s4_all" if has_subset else ALL, method))))
+            complete = all((k, method) in index for k, _ in S4_FAMILIES)
+            whole = index.get(("s4_all" if has_subset else ALL, method)) if complete else None
+            row.append(format_cell(whole))
             rows.append(row)
             labels.append(method if len(suites) == 1 else f"{method} ({suite})")
     columns = [title for _, title in S4_FAMILIES] + ["All"]
