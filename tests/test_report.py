@@ -124,7 +124,8 @@ def test_tables_show_the_cells_and_flag_errors(run_dir: Path, tmp_path: Path) ->
     assert grasp.splitlines()[0] == "suite,method,episodes,reached,grasped,success"
 
 
-def test_missing_episodes_are_flagged(tmp_path: Path) -> None:
+def _fake_sweep(tmp_path: Path, **config: object) -> Path:
+    """One ``fake`` sweep of the fake suite into ``tmp_path/runs``; returns that run directory."""
     suites = tmp_path / "tasks"
     suites.mkdir()
     write_fake_suite(suites)
@@ -139,11 +140,16 @@ def test_missing_episodes_are_flagged(tmp_path: Path) -> None:
                 workers=0,
                 progress=False,
                 command="t",
-                episodes=3,
+                **config,  # type: ignore[arg-type]
             )
         )
     finally:
         unregister_method("fake")
+    return tmp_path / "runs"
+
+
+def test_missing_episodes_are_flagged(tmp_path: Path) -> None:
+    _fake_sweep(tmp_path, episodes=3)
     # a sweep cut short: task 3's episodes never arrived
     with sqlite3.connect(tmp_path / "runs" / STORE_NAME) as db:
         db.execute("DELETE FROM episodes WHERE task = 3")
@@ -155,17 +161,7 @@ def test_missing_episodes_are_flagged(tmp_path: Path) -> None:
 
 
 def test_a_held_out_family_alone_gets_its_s4_cell_and_no_all(tmp_path: Path) -> None:
-    suites = tmp_path / "tasks"
-    suites.mkdir()
-    write_fake_suite(suites)
-    register_method(MethodSpec("fake", f"{FAKES}:SkillPolicy"))
-    try:
-        common = dict(method="fake", suites_dir=suites, workers=0, progress=False, command="t")
-        run_sweep(
-            SweepConfig(suite="fake", out=tmp_path / "runs", episodes=3, tasks=(2,), **common)
-        )
-    finally:
-        unregister_method("fake")
+    _fake_sweep(tmp_path, episodes=3, tasks=(2,))
     result = write_report(tmp_path / "runs", tmp_path / "rep")
     assert result.warnings == []  # the protocol is the drawer task alone: nothing missing
     summary = json.loads((tmp_path / "rep" / "summary.json").read_text())
