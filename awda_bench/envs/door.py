@@ -226,17 +226,23 @@ class DoorEnv(AWDATaskEnv):
         opening = self.agent.gripper_opening_m.reshape(-1)
         return hand_holds(both, torch.stack([f1, f2], dim=1), opening)
 
-    def is_pushing_target(self, min_force_n: float = 0.05) -> torch.Tensor:
+    def is_pushing_target(
+        self, min_force_n: float = 0.05, grasping: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """(n,) a finger presses on the target door with >= ``min_force_n`` [N], no grasp (the
-        passive, damped joint resists a steady push with only a few tenths of a newton)."""
+        passive, damped joint resists a steady push with only a few tenths of a newton).
+        ``grasping``: :meth:`is_grasping_target` if the caller has it already."""
         f1, f2 = self._target_contacts()
-        return (torch.maximum(f1, f2) >= min_force_n) & ~self.is_grasping_target()
+        return (torch.maximum(f1, f2) >= min_force_n) & ~(
+            self.is_grasping_target() if grasping is None else grasping
+        )
 
     def truth_signals(self) -> dict[str, torch.Tensor]:
         """``grasp`` (scored against the mined grasp attribute) and ``push`` (a finger on the
         door without a grasp: the swing being pushed shut, which moves -- not the pressing
         attribute, commanded motion that does not move, so it is not scored as "press")."""
-        return {"grasp": self.is_grasping_target(), "push": self.is_pushing_target()}
+        grasp = self.is_grasping_target()  # contact queries once per step, not twice
+        return {"grasp": grasp, "push": self.is_pushing_target(grasping=grasp)}
 
     # ------------------------------------------------------------------ evaluation
     def _evaluate_task(self) -> dict[str, torch.Tensor]:

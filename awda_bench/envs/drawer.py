@@ -220,17 +220,23 @@ class DrawerEnv(AWDATaskEnv):
         opening = self.agent.gripper_opening_m.reshape(-1)
         return hand_holds(both, self._target_contacts(), opening)
 
-    def is_pushing_target(self, min_force_n: float = 0.05) -> torch.Tensor:
+    def is_pushing_target(
+        self, min_force_n: float = 0.05, grasping: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """(n,) a finger presses on the target drawer with >= ``min_force_n`` [N], no grasp (the
-        passive, damped joint resists a steady push with only a few tenths of a newton)."""
+        passive, damped joint resists a steady push with only a few tenths of a newton).
+        ``grasping``: :meth:`is_grasping_target` if the caller has it already."""
         force = self._target_contacts().max(dim=1).values
-        return (force >= min_force_n) & ~self.is_grasping_target()
+        return (force >= min_force_n) & ~(
+            self.is_grasping_target() if grasping is None else grasping
+        )
 
     def truth_signals(self) -> dict[str, torch.Tensor]:
         """``grasp`` (scored against the mined grasp attribute) and ``push`` (a finger on the
         drawer without a grasp: the drawer being pushed shut, which moves -- not the pressing
         attribute, commanded motion that does not move, so it is not scored as "press")."""
-        return {"grasp": self.is_grasping_target(), "push": self.is_pushing_target()}
+        grasp = self.is_grasping_target()  # contact queries once per step, not twice
+        return {"grasp": grasp, "push": self.is_pushing_target(grasping=grasp)}
 
     # ------------------------------------------------------------------ evaluation
     def _evaluate_task(self) -> dict[str, torch.Tensor]:
