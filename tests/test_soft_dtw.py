@@ -89,18 +89,28 @@ def test_bad_shapes_and_gamma_are_refused() -> None:
         soft_dtw(torch.rand(1, 3, 2), torch.rand(1, 3, 3))
 
 
-# ----------------------------------------------------------------------------- ragged, numpy path
+# ------------------------------------------------------- ragged; numpy and fused triton paths
+# The triton kernels run in Triton's interpreter on a CPU tensor, and compiled on a GPU if present.
+DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+
+
+@pytest.mark.parametrize(
+    ("impl", "device"),
+    [("numpy", "cpu")] + [("triton", device) for device in DEVICES],
+)
 @pytest.mark.parametrize("gamma", [1.0, 1e-3])
-def test_numpy_path_matches_torch_reference_with_ragged_lengths(gamma: float) -> None:
+def test_fast_paths_match_torch_reference_with_ragged_lengths(
+    gamma: float, impl: str, device: str
+) -> None:
     g = torch.Generator().manual_seed(4)
-    x = torch.rand(6, 13, 4, generator=g, dtype=torch.float64, requires_grad=True)
-    y = torch.rand(6, 9, 4, generator=g, dtype=torch.float64, requires_grad=True)
-    lengths = torch.tensor([13, 1, 5, 7, 13, 2])
-    weights = torch.arange(1, 7, dtype=torch.float64)
+    x = torch.rand(6, 13, 4, generator=g, dtype=torch.float64).to(device).requires_grad_(True)
+    y = torch.rand(6, 9, 4, generator=g, dtype=torch.float64).to(device).requires_grad_(True)
+    lengths = torch.tensor([13, 1, 5, 7, 13, 2], device=device)
+    weights = torch.arange(1, 7, dtype=torch.float64, device=device)
     results = []
-    for impl in ("torch", "numpy"):
+    for name in ("torch", impl):
         x.grad = y.grad = None
-        values = soft_dtw(x, y, gamma, lengths=lengths, implementation=impl)
+        values = soft_dtw(x, y, gamma, lengths=lengths, implementation=name)
         (values * weights).sum().backward()
         assert x.grad is not None and y.grad is not None
         results.append((values.detach(), x.grad.clone(), y.grad.clone()))
@@ -109,6 +119,7 @@ def test_numpy_path_matches_torch_reference_with_ragged_lengths(gamma: float) ->
     # each ragged row is the soft-DTW of the truncated sequence, and padding gets no gradient
     for i, n in enumerate(lengths.tolist()):
         alone = soft_dtw(x[i : i + 1, :n], y[i : i + 1], gamma, implementation="torch")
+        assert alone.device.type == device
         assert abs(float(alone.detach()) - float(results[0][0][i])) <= 1e-9
         assert torch.all(results[1][1][i, n:] == 0)
 
@@ -148,3 +159,23 @@ def test_multi_waypoint_loss_in_one_call_equals_one_call_per_set(gamma: float) -
     for per_set, grad in out[:2]:
         assert torch.max(torch.abs(per_set - out[2][0])) <= 1e-6
         assert torch.max(torch.abs(grad - out[2][1])) <= 1e-6
+
+
+def test_bench_soft_dtw_times_native_implementations_side_by_side(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    import argparse
+
+    from awda_bench.models.bench_soft_dtw import add_soft_dtw_args, run_soft_dtw_bench
+
+    parser = argparse.ArgumentParser()
+    add_soft_dtw_args(parser)
+    assert run_soft_dtw_bench(parser.parse_args(["--recipe", "small", "--repeats", "1"])) == 0
+    lines = capsys.readouterr().out.splitlines()
+    rows = {line.split()[0]: line for line in lines if "fwd+bwd" in line}
+    assert set(rows) == {"numpy", "torch"}  # the CPU's native implementations, nothing else
+    for row in rows.values():
+        assert float(row.rsplit(":", 1)[1]) <= 1e-6  # agreement with the torch reference
+    assert any(line.startswith("  speed-up of") for line in lines)
+    with pytest.raises(UsageError, match="implementation"):
+        run_soft_dtw_bench(parser.parse_args(["--implementations", "cuda-kernel"]))

@@ -9,6 +9,7 @@ chosen one alone, so the CLI starts fast):
     harness     episodes/minute with 1 and 2 workers, harness overhead share
     episode-cost  per method: wall s, frames rendered, inference ms of one evaluated episode
     inference   waypoint network forward latency
+    soft-dtw    the multi-waypoint Soft-DTW loss per implementation (and its share of a step)
 """
 
 from __future__ import annotations
@@ -52,13 +53,19 @@ BENCHMARKS: dict[str, tuple[str, str, str, bool]] = {
         "run_inference_bench",
         False,
     ),
+    "soft-dtw": (
+        "awda_bench.models.bench_soft_dtw",
+        "add_soft_dtw_args",
+        "run_soft_dtw_bench",
+        False,
+    ),
 }
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "bench",
-        help="speed benchmarks (controller, env, primitives, harness, episode-cost, inference)",
+        help="speed benchmarks (controller, env, primitives, harness, episode-cost, inference, soft-dtw)",
         description="Run one benchmark; 'bench NAME --help' lists its options.",
     )
     parser.add_argument("benchmark", metavar="BENCHMARK", help=f"one of: {', '.join(BENCHMARKS)}")

@@ -33,7 +33,9 @@ recursion is causal (row ``i`` reads rows ``<= i``), so one table over the padde
 every sample's value at ``R[n_b, M]``; the backward recursion is seeded at ``(n_b + 1, M + 1)`` per
 sample and rows past ``n_b`` get ``E = 0``. This is what lets the multi-waypoint loss evaluate its
 5 polylines of different lengths in one call: 5x fewer anti-diagonal iterations (the Python loop
-is the cost of this implementation, not the arithmetic). A fused CUDA kernel is not provided.
+is the cost of this implementation, not the arithmetic). ``implementation="triton"`` runs both
+recursions as one fused Triton kernel launch each (:mod:`awda_bench.models.soft_dtw_triton`), tested
+against this reference.
 """
 
 from __future__ import annotations
@@ -124,11 +126,14 @@ def soft_dtw_backward_table(
     return e[:, 1 : n + 1, 1 : m + 1]
 
 
-IMPLEMENTATIONS: tuple[str, ...] = ("auto", "torch", "numpy")
-"""``torch``: the anti-diagonal loop in torch ops (any device; the reference); ``numpy``: the
+IMPLEMENTATIONS: tuple[str, ...] = ("auto", "torch", "numpy", "triton")
+"""``torch``: the anti-diagonal loop in torch ops (any device; the reference); ``triton``: the
+same recursions fused into one Triton kernel launch per pass (CUDA; on a CPU tensor Triton's
+interpreter runs it, for testing only); ``numpy``: the
 same recursion on the CPU, in the input's dtype, over a skewed table whose anti-diagonals are
 contiguous slices with the batch innermost (no gathers; numpy's per-op overhead is ~4x below
-torch's and its float32 ``exp`` is vectorized); ``auto``: numpy for CPU tensors, torch otherwise."""
+torch's and its float32 ``exp`` is vectorized); ``auto``: numpy for CPU tensors, triton on CUDA,
+torch otherwise."""
 
 
 def _skew(cost: np.ndarray) -> np.ndarray:
@@ -206,7 +211,12 @@ class _SoftDtwFunction(torch.autograd.Function):
             ctx.numpy_tables = (r, c, lens)
             values = r[lens + m, lens, np.arange(b)]
             return torch.from_numpy(values).to(dtype=cost.dtype, device=cost.device)
-        r_t = soft_dtw_forward_table(cost_d, gamma)
+        if impl == "triton":
+            from awda_bench.models import soft_dtw_triton
+
+            r_t = soft_dtw_triton.forward_table(cost_d, gamma)
+        else:
+            r_t = soft_dtw_forward_table(cost_d, gamma)
         if lengths is None:
             ctx.save_for_backward(cost_d, r_t)
             return r_t[:, n, m].clone()
@@ -222,7 +232,13 @@ class _SoftDtwFunction(torch.autograd.Function):
             e = torch.from_numpy(e_np).to(dtype=grad_output.dtype, device=grad_output.device)
         else:
             cost, r_t, *rest = ctx.saved_tensors
-            e = soft_dtw_backward_table(cost, r_t, ctx.gamma, rest[0] if rest else None)
+            lengths = rest[0] if rest else None
+            if ctx.impl == "triton":
+                from awda_bench.models import soft_dtw_triton
+
+                e = soft_dtw_triton.backward_table(cost, r_t, ctx.gamma, lengths)
+            else:
+                e = soft_dtw_backward_table(cost, r_t, ctx.gamma, lengths)
         return grad_output.view(-1, 1, 1) * e, None, None, None
 
 
@@ -300,7 +316,7 @@ def soft_dtw_from_cost(
     lengths = _check_lengths(lengths, cost.shape[0], cost.shape[1], cost.device)
     impl = implementation
     if impl == "auto":
-        impl = "numpy" if cost.device.type == "cpu" else "torch"
+        impl = {"cpu": "numpy", "cuda": "triton"}.get(cost.device.type, "torch")
     out: torch.Tensor = _SoftDtwFunction.apply(cost, float(gamma), lengths, impl)
     return out
 
