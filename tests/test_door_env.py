@@ -216,17 +216,20 @@ def test_hand_holds_a_handle_it_drags_with_one_finger_but_not_one_it_pushes_or_t
     from awda_bench.envs.articulated import HOLD_MIN_FORCE_N, hand_holds
 
     strong = 10 * HOLD_MIN_FORCE_N
-    cases = [  # (ManiSkill two-finger test, finger forces [N], opening [m]) -> holds
-        ((True, (strong, strong), 0.016), True),
+    cases = [  # (two-finger test, finger forces [N], opening [m], commanded closed) -> holds
+        ((True, (strong, strong), 0.016, True), True),
         (
-            (False, (0.0, strong), 0.020),
+            (False, (0.0, strong), 0.020, True),
             True,
         ),  # dragging along the arc: the trailing finger lost contact
-        ((False, (0.0, strong), 0.007), False),  # closed fingers pushing a panel
-        ((False, (strong, 0.0), 0.08), False),  # an open hand bumping into the handle
-        ((False, (0.0, 0.5 * HOLD_MIN_FORCE_N), 0.02), False),  # a light touch
+        ((False, (0.0, strong), 0.007, True), False),  # closed fingers pushing a panel
+        ((False, (strong, 0.0), 0.08, False), False),  # an open hand bumping into the handle
+        ((False, (0.0, 0.5 * HOLD_MIN_FORCE_N), 0.02, True), False),  # a light touch
+        # fingers opening after a closed-hand push, passing 3 cm with one still on the handle
+        ((False, (0.0, strong), 0.030, False), False),
     ]
     grasping = torch.tensor([c[0][0] for c in cases])
     forces = torch.tensor([c[0][1] for c in cases])
     opening = torch.tensor([c[0][2] for c in cases])
-    assert hand_holds(grasping, forces, opening).tolist() == [c[1] for c in cases]
+    closed = torch.tensor([c[0][3] for c in cases])
+    assert hand_holds(grasping, forces, opening, closed).tolist() == [c[1] for c in cases]

@@ -60,14 +60,17 @@ open hand that only touches."""
 
 
 def hand_holds(
-    grasping: torch.Tensor, finger_forces_n: torch.Tensor, opening_m: torch.Tensor
+    grasping: torch.Tensor,
+    finger_forces_n: torch.Tensor,
+    opening_m: torch.Tensor,
+    commanded_closed: torch.Tensor,
 ) -> torch.Tensor:
     """Simulator truth "grasp" of a door or drawer handle, (n,) bool.
 
     ManiSkill's two-finger test (``grasping``: both fingers press on the link, forces along their
     closing direction), or the closed hand *drags* the handle: one finger pulls on it with at
-    least :data:`HOLD_MIN_FORCE_N` while the fingers are closed on something (opening within
-    :data:`HOLD_OPENING_M`). Measured on a door-open demonstration: while the hand carried the
+    least :data:`HOLD_MIN_FORCE_N` while the fingers are closed on something (commanded closed,
+    opening within :data:`HOLD_OPENING_M`). Measured on a door-open demonstration: while the hand carried the
     handle along the arc, the trailing finger lost contact and the leading one pulled with up to
     47 N, the door swinging with it, and the two-finger test said "not grasped" for the whole
     swing (mined grasp precision on doors 0.54-0.64 against it).
@@ -76,11 +79,15 @@ def hand_holds(
         grasping: (n,) ManiSkill's ``agent.is_grasping(link)``.
         finger_forces_n: (n, 2) contact force magnitude of each finger on the link [N].
         opening_m: (n,) distance between the finger pads [m].
+        commanded_closed: (n,) the gripper's last command was "close". Without it, fingers
+            *opening* against a handle after a closed-hand push (passing 1-6 cm with one finger
+            still pressing) read as a grasp for 1-2 steps: every door/drawer-close demonstration
+            had such a truth grasp that nothing mined (grasp recall on those families 0.84-0.95).
     """
     low, high = HOLD_OPENING_M
     pulling = finger_forces_n.max(dim=1).values >= HOLD_MIN_FORCE_N
     closed_on_something = (opening_m >= low) & (opening_m <= high)
-    return grasping | (pulling & closed_on_something)
+    return grasping | (pulling & closed_on_something & commanded_closed)
 
 
 def hinge_joint_quat(opening_sign: int) -> list[float]:

@@ -19,6 +19,7 @@ from awda_bench.envs.articulated import (
     yaw_quat,
 )
 from awda_bench.envs.task_base import AWDATaskEnv
+from awda_bench.robot.controller import gripper_commanded_closed
 
 NUM_DOOR_VARIATIONS = 4
 """``variation = 2 * door + action``; action 0 = open, 1 = close."""
@@ -224,7 +225,8 @@ class DoorEnv(AWDATaskEnv):
             both = torch.where(door == j, self.agent.is_grasping(link), both)
         f1, f2 = self._target_contacts()
         opening = self.agent.gripper_opening_m.reshape(-1)
-        return hand_holds(both, torch.stack([f1, f2], dim=1), opening)
+        closed = gripper_commanded_closed(self.agent)
+        return hand_holds(both, torch.stack([f1, f2], dim=1), opening, closed)
 
     def is_pushing_target(
         self, min_force_n: float = 0.05, grasping: torch.Tensor | None = None

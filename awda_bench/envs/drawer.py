@@ -19,6 +19,7 @@ from awda_bench.envs.articulated import (
     yaw_quat,
 )
 from awda_bench.envs.task_base import AWDATaskEnv
+from awda_bench.robot.controller import gripper_commanded_closed
 
 NUM_DRAWER_VARIATIONS = 8
 """``variation = 2 * drawer + action`` with ``drawer = 2 * cabinet + level`` (level 0 = lower,
@@ -218,7 +219,8 @@ class DrawerEnv(AWDATaskEnv):
             if bool((drawer == j).any()):
                 both = torch.where(drawer == j, self.agent.is_grasping(link), both)
         opening = self.agent.gripper_opening_m.reshape(-1)
-        return hand_holds(both, self._target_contacts(), opening)
+        closed = gripper_commanded_closed(self.agent)
+        return hand_holds(both, self._target_contacts(), opening, closed)
 
     def is_pushing_target(
         self, min_force_n: float = 0.05, grasping: torch.Tensor | None = None

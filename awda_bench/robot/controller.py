@@ -38,6 +38,7 @@ saves it, ``set_state`` restores it (a restored scene continues as the original 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import torch
@@ -246,6 +247,12 @@ class BinaryGripperController(PDJointPosMimicController):
             closed[self.scene._reset_mask] = False
         self._apply(closed)
 
+    @property
+    def commanded_closed(self) -> torch.Tensor:
+        """(n,) bool: the fingers are being driven closed (the last command)."""
+        assert self._closed is not None, "reset() sets the command"
+        return self._closed[:, 0].clone()
+
     def get_state(self) -> dict:
         assert self._closed is not None, "reset() sets the command"
         return {"closed": self._closed.clone()}
@@ -277,6 +284,13 @@ class BinaryGripperController(PDJointPosMimicController):
             + self._offset[None, :]
         )
         self.set_drive_targets(self._target_qpos)
+
+
+def gripper_commanded_closed(agent: Any) -> torch.Tensor:
+    """(n,) bool: ``agent``'s gripper (either embodiment) was last commanded to close."""
+    gripper = agent.controller.controllers["gripper"]
+    assert isinstance(gripper, BinaryGripperController)
+    return gripper.commanded_closed
 
 
 @dataclass
