@@ -131,3 +131,27 @@ def test_wrist_localization_in_the_sim_finds_the_target_below(pick_place_env) ->
     assert loc is not None and locator.frames == 1
     assert np.linalg.norm(loc.position_world[:2] - target[:2]) < 0.015
     assert loc.position_world[2] == pytest.approx(target[2] + 0.04, abs=0.01)  # the can's top
+
+
+@pytest.mark.slow
+def test_physics_only_planning_gives_the_same_rollout_as_full_env_steps(pick_place_env) -> None:
+    from awda_bench.policies.gt_waypoints import (
+        GTWaypointsConfig,
+        GTWaypointsPolicy,
+        episode_spec_for,
+    )
+
+    env = pick_place_env
+    rollouts = []
+    for physics_only in (False, True):
+        env.reset(seed=7, options={"task": 15})
+        policy = GTWaypointsPolicy(GTWaypointsConfig(physics_only_planning=physics_only))
+        (traj,) = policy.plan(
+            EpisodeContext(env=env.unwrapped, spec=episode_spec_for("pick_place", 15, 7))
+        )
+        rollouts.append(traj)
+    full, physics = rollouts
+    assert full.meta["expert_done"] and len(full) > 20
+    np.testing.assert_array_equal(physics.tcp_pos, full.tcp_pos)
+    np.testing.assert_array_equal(physics.actions, full.actions)
+    np.testing.assert_array_equal(physics.gripper_opening_m, full.gripper_opening_m)

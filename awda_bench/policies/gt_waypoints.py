@@ -54,6 +54,10 @@ class GTWaypointsConfig:
     scoring the miner). Off when evaluating: the waypoints use only the mined attributes, and the
     contact-force test cost 12 % of a pick-place episode (1.24 of 10.7 s over 7 episodes,
     cProfile)."""
+    physics_only_planning: bool = True
+    """The planning rollout steps the physics alone (:func:`record_rollouts`): the scene is
+    restored afterwards and the expert reads the scene, so ManiSkill's ``evaluate()``,
+    observation and reward of every planning step are skipped."""
 
 
 def _numpy(x: Any) -> np.ndarray:
@@ -72,18 +76,25 @@ def robot_states(env: Any) -> list[RobotState]:
 
 
 def record_rollouts(
-    env: Any, policy: Policy, max_steps: int, record_truth: bool = True
+    env: Any,
+    policy: Policy,
+    max_steps: int,
+    record_truth: bool = True,
+    physics_only: bool = False,
 ) -> list[Trajectory]:
     """Run ``policy`` (already reset) on ``env`` from its current state; one Trajectory per env.
 
     Stops when the policy is done or after ``max_steps``. With ``record_truth``,
     ``truth["grasp"]`` is the simulator's contact test on the target object when the env has one
-    (``is_grasping_target``).
+    (``is_grasping_target``). ``physics_only`` (``env`` unwrapped, a policy that reads the scene,
+    not ``obs``: the scripted experts): each step is ManiSkill's ``_step_action`` alone -- no
+    ``evaluate()``, observation or reward, a quarter of an env step, which a rollout whose state
+    is restored afterwards does not need; the policy gets ``obs=None``.
     """
     n = int(env.num_envs)
     tcp, opening, actions, grasp = [], [], [], []
     has_truth = record_truth and hasattr(env, "is_grasping_target")
-    obs = env.get_obs()
+    obs = None if physics_only else env.get_obs()
     for _ in range(max_steps):
         if policy.done:
             break
@@ -94,7 +105,11 @@ def record_rollouts(
             grasp.append(_numpy(env.is_grasping_target()).astype(bool).reshape(n))
         action = np.asarray(policy.act(obs), dtype=np.float32).reshape(n, 4)
         actions.append(action)
-        obs, *_ = env.step(action)
+        if physics_only:
+            env._step_action(action)
+            env._elapsed_steps += 1
+        else:
+            obs, *_ = env.step(action)
     T = len(actions)
     tcp_a = np.asarray(tcp, dtype=np.float64).reshape(T, n, 3)
     open_a = np.asarray(opening, dtype=np.float64).reshape(T, n)
@@ -164,7 +179,11 @@ class GTWaypointsPolicy:
         expert = make_expert(ctx.spec.suite, embodiment="agent")
         expert.reset(ctx)
         trajectories = record_rollouts(
-            env, expert, self.config.planning_steps, record_truth=self.config.record_truth
+            env,
+            expert,
+            self.config.planning_steps,
+            record_truth=self.config.record_truth,
+            physics_only=self.config.physics_only_planning,
         )
         env.set_state_dict(saved)
         if elapsed is not None:
