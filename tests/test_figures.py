@@ -14,6 +14,7 @@ from awda_bench.harness.figures import (
     fig_s5,
     plot_success_vs_snapshot,
     project_points,
+    scene_figure,
     waypoint_colours,
     write_mp4,
 )
@@ -85,3 +86,13 @@ def test_success_plot_is_written(tmp_path: Path) -> None:
         {"ord": [0, 1, 2], "name": ["a", "b", "c"], "rate": [0.1, 0.5, 0.7], "ok": [10, 10, 10]}
     )
     assert plot_success_vs_snapshot(table, "t", tmp_path / "p.png").stat().st_size > 1000
+
+
+def test_scene_figure_puts_the_two_frames_side_by_side_with_labels() -> None:
+    first = np.full((240, 320, 3), 40, np.uint8)
+    during = np.full((240, 320, 3), 90, np.uint8)
+    image = scene_figure(first, during)
+    assert image.shape == (240, 640, 3)
+    # the frames are where they belong below the label band; the labels are drawn in white
+    assert np.all(image[100:, :320] == 40) and np.all(image[100:, 320:] == 90)
+    assert (image[:30, :320] == 255).any() and (image[:30, 320:] == 255).any()

@@ -22,6 +22,12 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser.add_argument("--embodiment", choices=EMBODIMENT_NAMES, default="demonstrator")
     parser.add_argument("--out", type=Path, required=True, help="output video path (.mp4)")
     parser.add_argument(
+        "--figure",
+        type=Path,
+        default=None,
+        help="also write a PNG: the first frame beside the middle one (reports/figures/FAMILY.png)",
+    )
+    parser.add_argument(
         "--render-every",
         type=int,
         default=2,
@@ -42,9 +48,14 @@ def run(args: argparse.Namespace) -> int:
     video = save_video(frames, args.out, fps=suite.control_freq_hz / args.render_every)
     npz = video.with_suffix(".npz")
     trajectory.save(npz)
+    if args.figure is not None:
+        from awda_bench.harness.figures import scene_figure, write_png
+
+        write_png(scene_figure(frames[0], frames[len(frames) // 2]), args.figure)
+        print(f"{args.figure}: first frame | frame {len(frames) // 2} of {len(frames)}")
     meta = trajectory.meta
     print(
         f"{video}: {len(frames)} frames; {npz}: {len(trajectory)} steps; "
-        f"success={meta['success']} reached={meta['reached']} grasped={meta['grasped']}"
+        f"success={meta['success']} success_once={meta['success_once']} reached={meta['reached']} grasped={meta['grasped']}"
     )
     return 0

@@ -141,6 +141,25 @@ def fig_s5(
     return image
 
 
+def scene_figure(first: np.ndarray, during: np.ndarray) -> np.ndarray:
+    """Two third-person frames side by side, labelled "first frame" and "during the expert's
+    episode" (the task scenes in ``reports/figures/``, written by ``demo --figure``)."""
+    image = np.concatenate([np.asarray(first, np.uint8), np.asarray(during, np.uint8)], axis=1)
+    scale = first.shape[0] / 240
+    for x, text in ((6, "first frame"), (first.shape[1] + 6, "during the expert's episode")):
+        cv2.putText(
+            image,
+            text,
+            (round(x * scale), round(22 * scale)),
+            cv2.FONT_HERSHEY_SIMPLEX,
+            0.6 * scale,
+            (255, 255, 255),
+            max(1, round(2 * scale)),
+            cv2.LINE_AA,
+        )
+    return image
+
+
 def write_png(image_rgb: np.ndarray, path: Path) -> Path:
     path.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(path), cv2.cvtColor(image_rgb, cv2.COLOR_RGB2BGR)):
