@@ -56,6 +56,7 @@ def run(args: argparse.Namespace) -> int:
     meta = trajectory.meta
     print(
         f"{video}: {len(frames)} frames; {npz}: {len(trajectory)} steps; "
-        f"success={meta['success']} success_once={meta['success_once']} reached={meta['reached']} grasped={meta['grasped']}"
+        f"success={meta['success']} success_once={meta['success_once']} "
+        f"reached={meta['reached']} grasped={meta['grasped']}"
     )
     return 0
