@@ -7,8 +7,10 @@ launches, forward and backward, and the multi-waypoint loss of a paper-scale AWD
 ~348 ms of ~470 ms there (issue 13, one H100). Here each sample's whole recursion is **one**
 program: its lanes hold one anti-diagonal (lane ``k`` is row ``i = k + 1``), read the two previous
 diagonals from the sample's table in global memory, write the new one, and meet at a barrier before
-the next — the wavefront scheme of the CUDA soft-DTW kernels (Maghoumi et al.), written in Triton
-so no extra dependency (Triton ships with torch) or hand-written CUDA is needed.
+the next (loads of the table being written bypass L1: ``cache_modifier=".cg"``) -- the wavefront
+scheme of the CUDA soft-DTW kernels (Maghoumi et al.), written in Triton so no extra dependency
+(Triton ships with torch) or hand-written CUDA is needed. ``gamma`` is passed as a one-element
+tensor of the tables' dtype (a Python float argument would be float32 inside the kernel).
 
 Only the recursions are fused; the squared-Euclidean cost and the chain rule from ``E`` back to
 the sequences stay ordinary batched torch ops. The tables and their borders are set up exactly as
@@ -29,8 +31,9 @@ import triton.language as tl
 from triton.runtime.interpreter import InterpretedFunction
 
 
-def _forward_kernel(cost_ptr, r_ptr, n, m, gamma, BLOCK: tl.constexpr):  # noqa: N803
+def _forward_kernel(cost_ptr, r_ptr, n, m, gamma_ptr, BLOCK: tl.constexpr):  # noqa: N803
     b = tl.program_id(0)
+    gamma = tl.load(gamma_ptr)  # in the tables' dtype (a float argument would be float32)
     width = m + 2
     cost_b = cost_ptr + b * n * m
     r_b = r_ptr + b * (n + 2) * width
@@ -39,9 +42,9 @@ def _forward_kernel(cost_ptr, r_ptr, n, m, gamma, BLOCK: tl.constexpr):  # noqa:
     for d in range(2, n + m + 1):
         j = d - i
         mask = (i <= n) & (j >= 1) & (j <= m)
-        p0 = tl.load(r_b + (i - 1) * width + (j - 1), mask=mask, other=0.0)
-        p1 = tl.load(r_b + (i - 1) * width + j, mask=mask, other=0.0)
-        p2 = tl.load(r_b + i * width + (j - 1), mask=mask, other=0.0)
+        p0 = tl.load(r_b + (i - 1) * width + (j - 1), mask=mask, other=0.0, cache_modifier=".cg")
+        p1 = tl.load(r_b + (i - 1) * width + j, mask=mask, other=0.0, cache_modifier=".cg")
+        p2 = tl.load(r_b + i * width + (j - 1), mask=mask, other=0.0, cache_modifier=".cg")
         low = tl.minimum(tl.minimum(p0, p1), p2)
         total = tl.exp((low - p0) * inv) + tl.exp((low - p1) * inv) + tl.exp((low - p2) * inv)
         c = tl.load(cost_b + (i - 1) * m + (j - 1), mask=mask, other=0.0)
@@ -49,8 +52,9 @@ def _forward_kernel(cost_ptr, r_ptr, n, m, gamma, BLOCK: tl.constexpr):  # noqa:
         tl.debug_barrier()
 
 
-def _backward_kernel(c_ptr, r_ptr, e_ptr, len_ptr, n, m, gamma, BLOCK: tl.constexpr):  # noqa: N803
+def _backward_kernel(c_ptr, r_ptr, e_ptr, len_ptr, n, m, gamma_ptr, BLOCK: tl.constexpr):  # noqa: N803
     b = tl.program_id(0)
+    gamma = tl.load(gamma_ptr)
     width = m + 2
     offset = b * (n + 2) * width
     c_b, r_b, e_b = c_ptr + offset, r_ptr + offset, e_ptr + offset
@@ -90,9 +94,9 @@ def _backward_kernel(c_ptr, r_ptr, e_ptr, len_ptr, n, m, gamma, BLOCK: tl.conste
             * inv
         )
         value = (
-            tl.load(e_b + down, mask=mask, other=0.0) * a
-            + tl.load(e_b + right, mask=mask, other=0.0) * bb
-            + tl.load(e_b + diag, mask=mask, other=0.0) * cc
+            tl.load(e_b + down, mask=mask, other=0.0, cache_modifier=".cg") * a
+            + tl.load(e_b + right, mask=mask, other=0.0, cache_modifier=".cg") * bb
+            + tl.load(e_b + diag, mask=mask, other=0.0, cache_modifier=".cg") * cc
         )
         tl.store(e_b + i * width + j, value, mask=mask)
         tl.debug_barrier()
@@ -116,7 +120,8 @@ def forward_table(cost: torch.Tensor, gamma: float) -> torch.Tensor:
     r = torch.full((b, n + 2, m + 2), float("inf"), dtype=cost.dtype, device=cost.device)
     r[:, 0, 0] = 0.0
     forward, _ = _kernels(cost.device.type != "cuda")
-    forward[(b,)](cost, r, n, m, float(gamma), BLOCK=_block(n))
+    g = torch.tensor([gamma], dtype=cost.dtype, device=cost.device)
+    forward[(b,)](cost, r, n, m, g, BLOCK=_block(n))
     return r
 
 
@@ -139,5 +144,6 @@ def backward_table(
     e[batch, lengths + 1, m + 1] = 1.0
     _, backward = _kernels(cost.device.type != "cuda")
     lens = lengths.to(torch.int32).contiguous()
-    backward[(b,)](c, rr.contiguous(), e, lens, n, m, float(gamma), BLOCK=_block(n))
+    g = torch.tensor([gamma], dtype=cost.dtype, device=cost.device)
+    backward[(b,)](c, rr.contiguous(), e, lens, n, m, g, BLOCK=_block(n))
     return e[:, 1 : n + 1, 1 : m + 1]
