@@ -85,6 +85,33 @@ def soft_dtw_forward_table(cost: torch.Tensor, gamma: float) -> torch.Tensor:
     return r
 
 
+def backward_tables(
+    cost: torch.Tensor, r: torch.Tensor, lengths: torch.Tensor | None
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """The padded tables the backward recursion reads, ``(c, rr, e, lengths)``, all
+    ``(B, N + 2, M + 2)`` but ``lengths (B,)`` (every row where ``None`` was given).
+
+    ``c``: the cost with a zero border. ``rr``: ``r`` with ``-inf`` in column ``M + 1`` and past
+    each sample's last row, so border terms contribute ``exp(-inf) = 0``, except the corner
+    ``(n_b + 1, M + 1)`` which holds ``R[n_b, M]``. ``e``: zeros but 1 at that corner (the seed).
+    Shared by the torch loop and the fused Triton kernel.
+    """
+    b, n, m = cost.shape
+    if lengths is None:
+        lengths = torch.full((b,), n, dtype=torch.long, device=cost.device)
+    c = torch.zeros((b, n + 2, m + 2), dtype=cost.dtype, device=cost.device)
+    c[:, 1 : n + 1, 1 : m + 1] = cost
+    rows = torch.arange(n + 2, device=cost.device)
+    batch = torch.arange(b, device=cost.device)
+    rr = r.clone()
+    rr[:, :, m + 1] = -float("inf")
+    rr[rows.view(1, -1) > lengths.view(-1, 1)] = -float("inf")
+    rr[batch, lengths + 1, m + 1] = r[batch, lengths, m]
+    e = torch.zeros((b, n + 2, m + 2), dtype=cost.dtype, device=cost.device)
+    e[batch, lengths + 1, m + 1] = 1.0
+    return c, rr, e, lengths
+
+
 def soft_dtw_backward_table(
     cost: torch.Tensor, r: torch.Tensor, gamma: float, lengths: torch.Tensor | None = None
 ) -> torch.Tensor:
@@ -93,26 +120,9 @@ def soft_dtw_backward_table(
     ``lengths (B,)``: rows each sample uses (default all ``N``); ``E`` is 0 on the other rows.
     """
     b, n, m = cost.shape
-    # Padded copies: cost gets a zero border, R gets -inf borders (and -inf past each sample's
-    # last row) so border terms contribute exp(-inf) = 0, except the corner (n_b + 1, M + 1)
-    # which seeds the recursion with E = 1.
-    c = torch.zeros((b, n + 2, m + 2), dtype=cost.dtype, device=cost.device)
-    c[:, 1 : n + 1, 1 : m + 1] = cost
-    rr = r.clone()
-    rr[:, :, m + 1] = -float("inf")
-    e = torch.zeros((b, n + 2, m + 2), dtype=cost.dtype, device=cost.device)
-    if lengths is None:
-        rr[:, n + 1, :] = -float("inf")
-        rr[:, n + 1, m + 1] = r[:, n, m]
-        e[:, n + 1, m + 1] = 1.0
-        valid = None
-    else:
-        rows = torch.arange(n + 2, device=cost.device)
-        rr[rows.view(1, -1) > lengths.view(-1, 1)] = -float("inf")
-        batch = torch.arange(b, device=cost.device)
-        rr[batch, lengths + 1, m + 1] = r[batch, lengths, m]
-        e[batch, lengths + 1, m + 1] = 1.0
-        valid = rows.view(1, -1) <= lengths.view(-1, 1)  # (B, N + 2)
+    c, rr, e, lengths = backward_tables(cost, r, lengths)
+    rows = torch.arange(n + 2, device=cost.device)
+    valid = rows.view(1, -1) <= lengths.view(-1, 1)  # (B, N + 2)
     for d in range(n + m, 1, -1):
         i, j = _diagonal_indices(n, m, d, cost.device)
         r_ij = rr[:, i, j]
@@ -120,8 +130,8 @@ def soft_dtw_backward_table(
         bb = torch.exp((rr[:, i, j + 1] - r_ij - c[:, i, j + 1]) / gamma)
         cc = torch.exp((rr[:, i + 1, j + 1] - r_ij - c[:, i + 1, j + 1]) / gamma)
         value = e[:, i + 1, j] * a + e[:, i, j + 1] * bb + e[:, i + 1, j + 1] * cc
-        if valid is not None:  # rows past n_b: -inf - -inf = NaN there, and E must be 0
-            value = torch.where(valid[:, i], value, torch.zeros_like(value))
+        # rows past n_b: -inf - -inf = NaN there, and E must be 0
+        value = torch.where(valid[:, i], value, torch.zeros_like(value))
         e[:, i, j] = value
     return e[:, 1 : n + 1, 1 : m + 1]
 

@@ -30,6 +30,8 @@ import triton
 import triton.language as tl
 from triton.runtime.interpreter import InterpretedFunction
 
+from awda_bench.models.soft_dtw import backward_tables
+
 
 def _forward_kernel(cost_ptr, r_ptr, n, m, gamma_ptr, BLOCK: tl.constexpr):  # noqa: N803
     b = tl.program_id(0)
@@ -130,18 +132,7 @@ def backward_table(
 ) -> torch.Tensor:
     """Same ``E`` as :func:`~awda_bench.models.soft_dtw.soft_dtw_backward_table`, one launch."""
     b, n, m = cost.shape
-    c = torch.zeros((b, n + 2, m + 2), dtype=cost.dtype, device=cost.device)
-    c[:, 1 : n + 1, 1 : m + 1] = cost
-    if lengths is None:
-        lengths = torch.full((b,), n, dtype=torch.long, device=cost.device)
-    rows = torch.arange(n + 2, device=cost.device)
-    batch = torch.arange(b, device=cost.device)
-    rr = r.clone()
-    rr[:, :, m + 1] = -float("inf")
-    rr[rows.view(1, -1) > lengths.view(-1, 1)] = -float("inf")
-    rr[batch, lengths + 1, m + 1] = r[batch, lengths, m]
-    e = torch.zeros((b, n + 2, m + 2), dtype=cost.dtype, device=cost.device)
-    e[batch, lengths + 1, m + 1] = 1.0
+    c, rr, e, lengths = backward_tables(cost, r, lengths)
     _, backward = _kernels(cost.device.type != "cuda")
     lens = lengths.to(torch.int32).contiguous()
     g = torch.tensor([gamma], dtype=cost.dtype, device=cost.device)
