@@ -1,5 +1,6 @@
-"""The learned closed-loop ``tosvi`` method: per-frame features computed once per frame give the
-same action distribution as the network's full forward pass on the same stack; the stack pads with
+"""The learned closed-loop ``tosvi`` method: per-frame features (RGB, and +depth's wrist-depth
+vectors) computed once per frame give the same action distribution as the network's full forward
+pass on the same stack; the stack pads with
 the first frame as training samples do; actions are valid (gripper binarized); wrong snapshots
 and options are refused in one line."""
 
@@ -18,6 +19,7 @@ from awda_bench.models.architectures import build_model
 from awda_bench.models.config import AwdaConfig, TosviConfig, TrunkConfig
 from awda_bench.models.snapshot import save_snapshot
 from awda_bench.policies.base import EpisodeContext, EpisodeSpec
+from awda_bench.robot.cameras import DepthFrame
 
 H, W = 64, 80
 
@@ -35,17 +37,36 @@ def snapshot(tmp_path: Path) -> Path:
     return path
 
 
+@pytest.fixture
+def depth_snapshot(tmp_path: Path) -> Path:
+    torch.manual_seed(0)
+    config = TosviConfig(
+        trunk=_trunk(), frame_stack=3, use_depth=True, depth_height_px=32, depth_width_px=40
+    )
+    path = tmp_path / "depth" / "snapshot-000000001.pt"
+    path.parent.mkdir()
+    save_snapshot(path, build_model(config), step=1)
+    return path
+
+
 class _Frames:
-    """Stands in for the harness camera: a new random 120x160 frame per capture."""
+    """Stands in for the harness cameras: a new random 120x160 frame (and a 64x80 wrist depth
+    image, nearest-resized by the policy) per capture."""
 
     def __init__(self) -> None:
         self.rng = np.random.default_rng(0)
         self.shown: list[np.ndarray] = []
+        self.depths: list[np.ndarray] = []
 
     def __call__(self, env: object, uid: str = "third_person") -> np.ndarray:
         frame = self.rng.integers(0, 256, (1, 120, 160, 3), dtype=np.uint8)
         self.shown.append(frame[0])
         return frame
+
+    def depth(self, env: object, uid: str = "wrist") -> DepthFrame:
+        depth = self.rng.uniform(0.05, 1.5, (1, 64, 80)).astype(np.float32)
+        self.depths.append(depth[0, ::2, ::2])  # what nearest-resizing to 32x40 keeps
+        return DepthFrame(depth, np.eye(3), np.eye(4)[None])
 
 
 def _policy(snapshot: Path, monkeypatch: pytest.MonkeyPatch, select: str):
@@ -53,6 +74,7 @@ def _policy(snapshot: Path, monkeypatch: pytest.MonkeyPatch, select: str):
 
     camera = _Frames()
     monkeypatch.setattr("awda_bench.robot.cameras.capture_rgb", camera)
+    monkeypatch.setattr("awda_bench.robot.cameras.capture_wrist_depth", camera.depth)
     policy = TosviPolicy(snapshot, select)
     demo = np.random.default_rng(1).integers(0, 256, (2, 120, 160, 3), dtype=np.uint8)
     spec = EpisodeSpec(suite="pick_place", task=14, episode=0, seed=1, demo_seed=2)
@@ -83,6 +105,25 @@ def test_cached_stack_equals_the_full_forward_pass(
         np.testing.assert_allclose(action[0, :3], expected[:3], atol=1e-5)
         assert action[0, 3] == (1.0 if expected[3] > 0 else -1.0)
     assert policy.steps == 5 and policy.inference_s > 0 and not policy.done
+
+
+def test_cached_depth_vectors_equal_the_full_forward_pass(
+    depth_snapshot: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    policy, camera, demo = _policy(depth_snapshot, monkeypatch, "mode")
+    assert policy.name == "tosvi-depth"
+    for step in range(5):
+        action = policy.act(None)
+        index = np.clip(np.arange(step - 2, step + 1), 0, None)
+        depth = torch.from_numpy(np.stack([camera.depths[i] for i in index]))[None, :, None]
+        expected = policy.model.predict_action(
+            _small(demo),
+            _small(np.stack([camera.shown[i] for i in index])),
+            depth,
+            statistic="mode",
+        )[0].numpy()
+        np.testing.assert_allclose(action[0, :3], expected[:3], atol=1e-5)
+        assert action[0, 3] == (1.0 if expected[3] > 0 else -1.0)
 
 
 def test_sampled_actions_are_valid_and_follow_torch_seed(

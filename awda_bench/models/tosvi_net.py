@@ -114,15 +114,21 @@ class TosviNet(nn.Module):
                     f"got {got}"
                 )
 
-    def _fuse_depth(self, features: torch.Tensor, depth: torch.Tensor) -> torch.Tensor:
-        """RGB features ``(B, T, 512, h, w)`` + agent depth ``(B, S, 1, Hd, Wd)`` -> fused."""
-        assert self.depth_backbone is not None and self.depth_fusion is not None
+    def depth_vectors(self, depth: torch.Tensor) -> torch.Tensor:
+        """Wrist depth ``(B, S, 1, Hd, Wd)`` [m] -> one vector per frame ``(B, S, 512)`` (the depth
+        ResNet sees each frame on its own, so a closed-loop policy encodes each frame once)."""
+        assert self.depth_backbone is not None
         cfg = self.config
-        b, t, c, h, w = features.shape
-        s = depth.shape[1]
+        b, s = depth.shape[:2]
         scaled = depth.clamp(0.0, cfg.max_depth_m) / cfg.max_depth_m * 2.0 - 1.0
         depth_maps = self.depth_backbone(scaled.reshape(b * s, *depth.shape[2:]))
-        depth_vec = depth_maps.mean(dim=(-2, -1)).view(b, s, c)
+        return depth_maps.mean(dim=(-2, -1)).view(b, s, FEATURE_CHANNELS)
+
+    def _fuse_depth(self, features: torch.Tensor, depth_vec: torch.Tensor) -> torch.Tensor:
+        """RGB features ``(B, T, 512, h, w)`` + agent depth vectors ``(B, S, 512)`` -> fused."""
+        assert self.depth_fusion is not None
+        b, t, c, h, w = features.shape
+        s = depth_vec.shape[1]
         demo_zeros = depth_vec.new_zeros(b, t - s, c)
         per_frame = torch.cat((demo_zeros, depth_vec), dim=1)  # (B, T, 512)
         stacked = torch.cat((features, per_frame[..., None, None].expand(-1, -1, -1, h, w)), dim=2)
@@ -135,19 +141,21 @@ class TosviNet(nn.Module):
         """Mixture parameters: policy ``(B, A, 3M)`` for a_t, inverse ``(B, S-1, A, 3M)``."""
         self._check_inputs(demo, frames, depth)
         features = self.trunk.frame_features(torch.cat((demo, frames), dim=1))
-        return self.heads_from_features(features, depth)
+        vectors = self.depth_vectors(depth) if depth is not None and self.config.use_depth else None
+        return self.heads_from_features(features, vectors)
 
     def heads_from_features(
-        self, features: torch.Tensor, depth: torch.Tensor | None = None
+        self, features: torch.Tensor, depth_vectors: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """The part of :meth:`forward` after the per-frame ResNet: ``features`` ``(B, demo_frames +
-        frame_stack, 512, h, w)`` from ``trunk.frame_features`` (each frame's features depend on
-        that frame alone, so a closed-loop policy computes each frame's once and keeps them)."""
+        """The part of :meth:`forward` after the per-frame ResNets: ``features`` ``(B, demo_frames +
+        frame_stack, 512, h, w)`` from ``trunk.frame_features`` and, for +depth, ``depth_vectors``
+        ``(B, frame_stack, 512)`` from :meth:`depth_vectors`. Each frame's features depend on that
+        frame alone, so a closed-loop policy computes each frame's once and keeps them."""
         cfg = self.config
         if cfg.use_depth:
-            if depth is None:
+            if depth_vectors is None:
                 raise UsageError("a T-OSVI +depth model needs the wrist depth stack")
-            features = self._fuse_depth(features, depth)
+            features = self._fuse_depth(features, depth_vectors)
         vectors = self.trunk.temporal(features)[:, -cfg.frame_stack :]  # (B, S, F)
         b, s = vectors.shape[:2]
         policy = self.policy_head(vectors[:, -1]).view(b, cfg.action_dim, -1)

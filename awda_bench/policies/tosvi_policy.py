@@ -3,15 +3,18 @@
 Per episode (SPEC §6; the AWDA paper's evaluator for the baseline)::
 
     demo video (demonstrator, other layout) --10 frames--> ResNet features, once per episode
-    every step t:  third-person frame o_t (+ wrist depth d_t for +depth) --> ResNet features
-                   [demo features, features of o_{t-5} .. o_t] --> attention --> action mixture
+    every step t:  third-person frame o_t --> ResNet features (+ wrist depth d_t --> depth ResNet
+                   vector, for +depth)
+                   [demo features, features of o_{t-5} .. o_t (+ depth vectors)] --> attention
+                   --> action mixture
                    a_t = sample | mean | mode of the mixture; gripper command binarized (+1 / -1)
 
 The agent stack is a sliding window of the last ``frame_stack`` frames; at the start of an episode
 the missing older frames repeat the first one, exactly as the training samples do
 (:class:`~awda_bench.data.datasets.TosviDataset`). The ResNet sees each frame on its own (frozen
-BatchNorm statistics in eval mode), so each frame's features are computed once and kept: a step
-costs one frame through the ResNet plus the attention layers, not sixteen frames.
+BatchNorm statistics in eval mode), and so does +depth's depth ResNet, so each frame's features
+are computed once and kept: a step costs one frame through the ResNet(s) plus the fusion and
+attention layers, not sixteen RGB and six depth frames.
 
 Frames are rendered by the harness camera (the suite's size) and area-downscaled to the snapshot's
 input size with OpenCV, as the ``train`` loader downscales the collected frames. The network only
@@ -98,7 +101,7 @@ class TosviPolicy:
         self._env: Any = None
         self._demo_features: Any = None
         self._frames: deque[Any] = deque(maxlen=self.frame_stack)
-        self._depths: deque[np.ndarray] = deque(maxlen=self.frame_stack)
+        self._depths: deque[Any] = deque(maxlen=self.frame_stack)
         self.inference_s = 0.0
         """Wall time of this episode's forward passes [s] (rendering excluded)."""
         self.steps = 0
@@ -145,19 +148,23 @@ class TosviPolicy:
         from awda_bench.robot.cameras import capture_rgb, capture_wrist_depth
 
         rgb = capture_rgb(self._env)[0]
-        depth = None
+        depth_m = None
         if self.use_depth:
             h, w = self.depth_size
-            depth = _resize(capture_wrist_depth(self._env).depth_m[0], h, w, nearest=True)
+            depth_m = _resize(capture_wrist_depth(self._env).depth_m[0], h, w, nearest=True)
         start = time.perf_counter()
         with torch.no_grad():
             features = self.model.trunk.frame_features(self._to_tensor(rgb[None]))[:, 0]
+            depth_vector = None
+            if depth_m is not None:
+                tensor = torch.from_numpy(depth_m.astype(np.float32)).to(self.device)
+                depth_vector = self.model.depth_vectors(tensor[None, None, None])[:, 0]  # (1, 512)
         self.inference_s += time.perf_counter() - start
         copies = self.frame_stack if not self._frames else 1
         for _ in range(copies):
             self._frames.append(features)
-            if depth is not None:
-                self._depths.append(depth)
+            if depth_vector is not None:
+                self._depths.append(depth_vector)
 
     def act(self, obs: Any) -> np.ndarray:
         import torch
@@ -168,10 +175,7 @@ class TosviPolicy:
         start = time.perf_counter()
         with torch.no_grad():
             features = torch.cat((self._demo_features, torch.stack(tuple(self._frames), 1)), 1)
-            depth = None
-            if self.use_depth:
-                stack = np.stack(tuple(self._depths))[None, :, None]  # (1, S, 1, Hd, Wd)
-                depth = torch.from_numpy(stack.astype(np.float32)).to(self.device)
+            depth = torch.stack(tuple(self._depths), 1) if self.use_depth else None  # (1, S, 512)
             policy, _ = self.model.heads_from_features(features, depth)
             dist = self.model.distribution(policy)
             if self.action_select == "sample":

@@ -436,7 +436,8 @@ def run_training(request: TrainRequest) -> TrainOutcome:
         state["validated"] = step
         outcome.validation.append((step, loss))
         state["log"].log(step, "val", {"loss": loss})
-        state["bar"].set_postfix(loss=f"{state.get('loss', float('nan')):.4g}", val=f"{loss:.4g}")
+        shown = {"loss": f"{state['loss']:.4g}"} if "loss" in state else {}  # none before step 1
+        state["bar"].set_postfix(**shown, val=f"{loss:.4g}")
 
     def on_start(start: int) -> None:
         from tqdm import tqdm
