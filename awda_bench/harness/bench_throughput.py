@@ -1,6 +1,9 @@
 """``python -m awda_bench bench harness``: episodes/minute with 1 and 2 workers, the parallel
 speed-up, and the harness's own overhead as a share of episode time (goal < 5 %);
 ``--backends local ray`` also times the Ray backend beside the local pool (goal >= 0.9x).
+Beside the speed-up it prints the machine's own ceiling for it (:mod:`core_scaling`: the most
+worker count's processes of pure compute and of memory streaming do at once, ~15 s), unless
+``--no-ceiling``.
 
 Each (backend, worker count) runs the same sweep into its own temporary store. Definitions::
 
@@ -21,6 +24,7 @@ import tempfile
 from pathlib import Path
 
 from awda_bench.harness.backends import BACKENDS
+from awda_bench.harness.core_scaling import measure_core_scaling
 from awda_bench.harness.methods import DEFAULT_METHOD
 from awda_bench.harness.results_store import STORE_NAME
 from awda_bench.harness.sweep import SweepConfig, SweepResult, run_sweep
@@ -47,6 +51,11 @@ def add_harness_args(parser: argparse.ArgumentParser) -> None:
         help="backends to time, each with every worker count (default local)",
     )
     parser.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
+    parser.add_argument(
+        "--no-ceiling",
+        action="store_true",
+        help="skip the machine's own N-process speed-up (compute and memory kernels, ~15 s)",
+    )
     parser.add_argument("--keep", type=Path, help="keep the run directories under this path")
     parser.add_argument("--tasks-dir", type=Path, default=SUITES_DIR, help=argparse.SUPPRESS)
     parser.add_argument("--env-factory", default=DEFAULT_ENV_FACTORY, help=argparse.SUPPRESS)
@@ -144,6 +153,14 @@ def run_harness_bench(args: argparse.Namespace) -> int:
                 f"{_ratio(r, peer[0], 'episodes_per_min'):.2f}x episodes/min "
                 f"(steady {_ratio(r, peer[0], 'steady_episodes_per_min'):.2f}x)"
             )
+    most = max(args.workers)
+    if len(local) >= 2 and most >= 2 and not args.no_ceiling:
+        ceilings = measure_core_scaling(most)
+        found = ", ".join(f"{c.kernel} {c.speedup:.2f}x" for c in ceilings)
+        print(
+            f"machine ceiling, {most} processes at once vs 1 (bench's core_scaling): {found} "
+            f"(ideal {most}.00x)"
+        )
     same = all(o == outcomes[0] for o in outcomes[1:])
     across = "backends and worker counts" if len(args.backends) > 1 else "worker counts"
     print(f"identical per-episode outcomes across {across}: {'yes' if same else 'NO'}")
