@@ -1,9 +1,9 @@
 """``python -m awda_bench bench harness``: episodes/minute with 1 and 2 workers, the parallel
 speed-up, and the harness's own overhead as a share of episode time (goal < 5 %);
 ``--backends local ray`` also times the Ray backend beside the local pool (goal >= 0.9x).
-Beside the speed-up it prints the machine's own ceiling for it (:mod:`core_scaling`: the most
-worker count's processes of pure compute and of memory streaming do at once, ~15 s), unless
-``--no-ceiling``.
+Beside the speed-up it prints the machine's own ceiling for it (:mod:`core_scaling`: what N
+processes of pure compute, and of memory streaming, achieve at once against one alone, N the
+largest worker count; ~15 s), unless ``--no-ceiling``.
 
 Each (backend, worker count) runs the same sweep into its own temporary store. Definitions::
 
