@@ -67,9 +67,9 @@ class Costs:
     collect_episode_s: float = 2.1
     """Per kept episode with 2 workers at 240x320 (760 episodes in 1588 s)."""
     train_step_s: dict[str, float] = field(
-        default_factory=lambda: {"awda": 2.23, "tosvi": 3.16, "tosvi-depth": 4.5}
+        default_factory=lambda: {"awda": 2.23, "tosvi": 3.16, "tosvi-depth": 4.7}
     )
-    """Per step of the ``small`` recipe, 2 threads (tosvi-depth: not measured, scaled)."""
+    """Per step of the ``small`` recipe, 2 threads (``recipes/small.toml`` has the measurements)."""
     paper_step_factor: float = 32.0
     """``paper`` recipe step cost ÷ ``small``'s on a CPU (~71 s vs 2.23 s)."""
     eval_episode_s: dict[str, float] = field(
