@@ -121,7 +121,33 @@ def test_tables_show_the_cells_and_flag_errors(run_dir: Path, tmp_path: Path) ->
     assert "RuntimeError: boom in act" in (tmp_path / "errors.md").read_text()
     assert r"$\pm$" in (tmp_path / "s3.tex").read_text()
     grasp = (tmp_path / "grasp.csv").read_text()
-    assert grasp.splitlines()[0] == "suite,method,episodes,reached,grasped,success"
+    assert grasp.splitlines()[0] == (
+        "suite,method,episodes,reached,grasped,success,grasp_wp_spread_cm"
+    )
+
+
+def test_grasp_waypoint_spread_follows_the_scene_not_a_constant() -> None:
+    import pandas as pd
+
+    from awda_bench.harness.aggregate import grasp_waypoint_spread_cm
+
+    def wps(x: float, y: float) -> str:  # free point, grasp point, release
+        return json.dumps([[0, 0, 0.2, 0], [x, y, 0.05, 1], [0.1, 0.1, 0.1, 1]])
+
+    rows = pd.DataFrame(
+        {
+            "snapshot": ["a"] * 4 + ["b"] * 4,
+            "task": [0, 0, 1, 1] * 2,
+            # snapshot a: the grasp point follows the scene (+-3 cm in x, +-4 cm in y)
+            # snapshot b: the same point every episode; one episode stores no waypoints
+            "waypoints": [wps(0.03, 0.0), wps(-0.03, 0.0), wps(0.0, 0.04), wps(0.0, -0.04)]
+            + [wps(0.1, 0.1)] * 3
+            + [None],
+        }
+    )
+    # a: task 0 std 3 cm, task 1 std 4 cm; b: 0 cm for task 0 (task 1 has one point: skipped)
+    assert grasp_waypoint_spread_cm(rows) == pytest.approx((3.0 + 4.0 + 0.0) / 3)
+    assert grasp_waypoint_spread_cm(rows.assign(waypoints=None)) is None
 
 
 def _fake_sweep(tmp_path: Path, **config: object) -> Path:

@@ -11,9 +11,11 @@ Every function here reads only the store's tables, so the numbers can be recompu
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import asdict, dataclass
 
+import numpy as np
 import pandas as pd
 
 METRICS = ("success_once", "success_at_end")
@@ -177,11 +179,46 @@ def all_cells(
     return cells
 
 
+GRASP_ATTRIBUTE = 3
+"""Column of the grasp attribute in a stored waypoint ``[x, y, z, grasp, ...]``."""
+
+
+def _grasp_xy(waypoints: object) -> tuple[float, float] | None:
+    """The first grasp-attributed waypoint's (x, y) [m] of one stored episode, or None."""
+    if not isinstance(waypoints, str) or not waypoints:
+        return None
+    for point in json.loads(waypoints):
+        if len(point) > GRASP_ATTRIBUTE and point[GRASP_ATTRIBUTE] > 0.5:
+            return float(point[0]), float(point[1])
+    return None
+
+
+def grasp_waypoint_spread_cm(episodes: pd.DataFrame) -> float | None:
+    """How far a method's predicted grasp point moves with the scene [cm]: per (snapshot, task),
+    the xy standard deviation (norm of the per-axis population std) of the first grasp-attributed
+    waypoint over that group's episodes, averaged over groups with two or more such episodes.
+
+    Episodes of one task differ in their seeded scene (object poses), so a method that reads its
+    images moves its grasp point with them (gt-waypoints: as much as the objects move), while a
+    network that outputs its training set's mean trajectory stays put (near 0). None without
+    waypoints (closed-loop and scripted methods store none).
+    """
+    points = episodes.assign(grasp_xy=episodes["waypoints"].map(_grasp_xy)).dropna(
+        subset=["grasp_xy"]
+    )
+    spreads = []
+    for _, group in points.groupby(["snapshot", "task"], sort=True):
+        if len(group) >= 2:
+            xy = np.array(group["grasp_xy"].tolist())
+            spreads.append(float(np.linalg.norm(xy.std(axis=0))) * 100.0)
+    return float(np.mean(spreads)) if spreads else None
+
+
 def grasp_analysis(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
     """Per (suite, method): reached / grasped / success rates over the ok episodes of tasks with a
     grasp target (those whose env reports both flags; in MOSAIC: stack block, basketball, nut
     assembly). Where no episode reports them the rates are ``None`` and success is over all ok
-    episodes.
+    episodes. ``grasp_wp_spread_cm``: :func:`grasp_waypoint_spread_cm` over all ok episodes.
     """
     ok = episodes[episodes["status"] == "ok"]
     out = []
@@ -192,7 +229,11 @@ def grasp_analysis(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
         for column in ("reached", "grasped"):
             row[column] = float(graspable[column].mean()) if len(graspable) else None
         row["success"] = float(rows[metric].mean())
+        row["grasp_wp_spread_cm"] = grasp_waypoint_spread_cm(g)
         out.append(row)
     return pd.DataFrame(
-        out, columns=["suite", "method", "episodes", "reached", "grasped", "success"]
-    )
+        out,
+        columns=[
+            "suite", "method", "episodes", "reached", "grasped", "success", "grasp_wp_spread_cm"
+        ],
+    )  # fmt: skip

@@ -191,7 +191,9 @@ def write_report(
     sections.append(
         (
             "grasp",
-            "Grasp analysis (rates over ok episodes of tasks with a grasp target; – = none reports it)",
+            "Grasp analysis (rates over ok episodes of tasks with a grasp target; – = none reports "
+            "it; grasp_wp_spread_cm: how far the predicted grasp point moves across a task's "
+            "episodes, near 0 for a network that ignores its images)",
             grasp,
         )
     )
