@@ -73,12 +73,13 @@ class Costs:
     paper_step_factor: float = 32.0
     """``paper`` recipe step cost ÷ ``small``'s on a CPU (~71 s vs 2.23 s)."""
     eval_episode_s: dict[str, float] = field(
-        default_factory=lambda: {"awda": 1.5, "tosvi": 16.5, "tosvi-depth": 21.0}
+        default_factory=lambda: {"awda": 1.5, "tosvi": 16.5, "tosvi-depth": 27.5}
     )
     """Per evaluated episode and worker, 2 workers on the 2 cores (awda: open loop, one forward
     pass; tosvi: a frame and a forward pass every step for the whole horizon; measured on
-    pick-place: 120 T-OSVI episodes of 180 steps at 16.5 s each per worker; tosvi-depth: not
-    measured, scaled by its extra wrist-depth render and encoder)."""
+    pick-place: 120 T-OSVI episodes of 180 steps at 16.5 s each per worker; tosvi-depth:
+    ``bench episode-cost`` alone, 1 worker, gives 22.0 s beside tosvi's 13.2 s, scaled by the
+    same 1.25 to two workers)."""
 
 
 COSTS = Costs()
