@@ -22,20 +22,34 @@ with an estimated wall time per stage from the per-unit costs in :data:`COSTS` (
 
 from __future__ import annotations
 
+import fcntl
 import json
+import os
+import signal
 import subprocess
 import sys
 import time
-from dataclasses import dataclass, field
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from awda_bench.errors import UnknownChoiceError, UsageError
+from awda_bench.errors import AwdaError, CorruptFileError, UnknownChoiceError, UsageError
 from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION
 from awda_bench.training.columns import COLUMNS, Column
 
 SUITES: tuple[str, ...] = ("pick_place", "mosaic")
 """Suites ``reproduce`` knows how to lay out."""
+
+
+class RunInterrupted(AwdaError):
+    """A signal stopped ``reproduce`` mid-stage; exit code 128 + the signal's number."""
+
+    def __init__(self, message: str, exit_code: int) -> None:
+        super().__init__(message)
+        self.exit_code = exit_code
 
 
 def column_key(column: Column) -> str:
@@ -395,26 +409,161 @@ def format_plan(config: ReproduceConfig, stages: list[Stage]) -> str:
     return "\n".join(lines)
 
 
-def run_stages(config: ReproduceConfig, stages: list[Stage]) -> list[tuple[str, float]]:
-    """Run every stage not done, in order; returns ``(stage, wall s)``; raises on a failure."""
-    timings: list[tuple[str, float]] = []
-    for stage in stages:
-        if stage.done:
-            print(f"[reproduce] {stage.name}: done, skipped", flush=True)
-            continue
-        argv = [sys.executable, "-m", "awda_bench", *stage.argv]
-        print(f"[reproduce] {stage.name}: {' '.join(argv[1:])}", flush=True)
-        start = time.perf_counter()
-        code = subprocess.call(argv)
-        wall = time.perf_counter() - start
-        if code != 0:
+STAGE_TIMES = "stage_times.json"
+"""``OUT/stage_times.json``: every attempt at every stage, across invocations (a killed run's
+stages add up)."""
+
+LOCK_FILE = ".reproduce.lock"
+HEARTBEAT_S = 30.0
+"""How often a running stage's wall time is written to :data:`STAGE_TIMES`."""
+
+
+@dataclass
+class StageAttempt:
+    """One run of one stage's command: how long, and how it ended."""
+
+    stage: str
+    started_at: str
+    wall_s: float
+    outcome: str
+    """``finished``, ``failed (exit N)``, ``interrupted (SIGTERM)``, ``running`` while it runs, or
+    ``killed`` when a later invocation finds a ``running`` attempt whose process is gone."""
+
+
+def read_stage_times(out: Path) -> list[StageAttempt]:
+    path = out / STAGE_TIMES
+    if not path.is_file():
+        return []
+    try:
+        return [StageAttempt(**row) for row in json.loads(path.read_text())]
+    except (ValueError, TypeError) as exc:
+        raise CorruptFileError(
+            f"{path} is not a stage-time log ({exc}); delete it to start a new log (only the "
+            "reported stage wall times are lost)"
+        ) from exc
+
+
+def write_stage_times(out: Path, attempts: list[StageAttempt]) -> None:
+    path = out / STAGE_TIMES
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps([asdict(a) for a in attempts], indent=1) + "\n")
+    os.replace(tmp, path)
+
+
+def stage_totals(attempts: list[StageAttempt]) -> list[tuple[str, float, int, str]]:
+    """``(stage, wall s summed over attempts, attempts, last outcome)`` in first-run order."""
+    totals: dict[str, list[Any]] = {}
+    for a in attempts:
+        row = totals.setdefault(a.stage, [0.0, 0, ""])
+        row[0] += a.wall_s
+        row[1] += 1
+        row[2] = a.outcome
+    return [(name, wall, n, last) for name, (wall, n, last) in totals.items()]
+
+
+@contextmanager
+def _exclusive(out: Path) -> Iterator[None]:
+    """Hold ``OUT/.reproduce.lock`` so that two invocations never run stages in one directory."""
+    out.mkdir(parents=True, exist_ok=True)
+    with open(out / LOCK_FILE, "a+") as handle:
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            handle.seek(0)
+            owner = handle.read().strip() or "?"
             raise UsageError(
-                f"stage {stage.name!r} exited {code} after {wall:.0f} s; fix what it printed and "
-                "re-run the same reproduce command (finished stages are skipped)"
+                f"another reproduce (pid {owner}) is running in {out}; wait for it to finish or "
+                "stop it (Ctrl-C or kill PID), then re-run this command to resume"
+            ) from None
+        handle.seek(0)
+        handle.truncate()
+        handle.write(str(os.getpid()))
+        handle.flush()
+        yield
+
+
+@contextmanager
+def _forward_stop_signals(child: subprocess.Popen, received: list[int]) -> Iterator[None]:
+    """While ``child`` runs in its own process group: SIGINT/SIGTERM/SIGHUP to this process stop
+    the whole group (the stage and its workers) with SIGTERM, a second one with SIGKILL."""
+
+    def handler(signum: int, _frame: object) -> None:
+        received.append(signum)
+        try:
+            os.killpg(child.pid, signal.SIGTERM if len(received) == 1 else signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+    stops = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+    saved = {s: signal.signal(s, handler) for s in stops}
+    try:
+        yield
+    finally:
+        for s, h in saved.items():
+            signal.signal(s, h)
+
+
+def run_stages(
+    config: ReproduceConfig,
+    stages: list[Stage],
+    command: tuple[str, ...] = (sys.executable, "-m", "awda_bench"),
+) -> list[StageAttempt]:
+    """Run every stage not done, in order, each as a subprocess in its own process group.
+
+    Every attempt is logged to ``OUT/stage_times.json`` (its wall time rewritten every
+    :data:`HEARTBEAT_S` while it runs), so the summary's stage times add up over a run that was
+    killed and resumed. Stopping this process (Ctrl-C, SIGTERM, SIGHUP) stops the running stage
+    and its workers too, records the attempt as interrupted and raises :class:`RunInterrupted`;
+    a failing stage raises :class:`UsageError`. ``command`` prefixes each stage's ``argv``.
+    Returns this invocation's attempts."""
+    with _exclusive(config.out):
+        log = read_stage_times(config.out)
+        for attempt in log:
+            if attempt.outcome == "running":  # its invocation died without a word (SIGKILL)
+                attempt.outcome = "killed"
+        mine: list[StageAttempt] = []
+        for stage in stages:
+            if stage.done:
+                print(f"[reproduce] {stage.name}: done, skipped", flush=True)
+                continue
+            argv = [*command, *stage.argv]
+            print(f"[reproduce] {stage.name}: {' '.join(argv[1:])}", flush=True)
+            attempt = StageAttempt(
+                stage.name, datetime.now(UTC).isoformat(timespec="seconds"), 0.0, "running"
             )
-        timings.append((stage.name, wall))
-        print(f"[reproduce] {stage.name}: {wall:.0f} s", flush=True)
-    return timings
+            log.append(attempt)
+            mine.append(attempt)
+            write_stage_times(config.out, log)
+            start = time.perf_counter()
+            received: list[int] = []
+            child = subprocess.Popen(argv, start_new_session=True)
+            with _forward_stop_signals(child, received):
+                while True:
+                    try:
+                        code = child.wait(timeout=HEARTBEAT_S)
+                        break
+                    except subprocess.TimeoutExpired:
+                        attempt.wall_s = round(time.perf_counter() - start, 1)
+                        write_stage_times(config.out, log)
+            attempt.wall_s = round(time.perf_counter() - start, 1)
+            if received:
+                name = signal.Signals(received[0]).name
+                attempt.outcome = f"interrupted ({name})"
+                write_stage_times(config.out, log)
+                raise RunInterrupted(
+                    f"{name}: stopped stage {stage.name!r} after {attempt.wall_s:.0f} s; re-run the "
+                    "same reproduce command to resume (finished stages and episodes are kept)",
+                    128 + received[0],
+                )
+            attempt.outcome = "finished" if code == 0 else f"failed (exit {code})"
+            write_stage_times(config.out, log)
+            if code != 0:
+                raise UsageError(
+                    f"stage {stage.name!r} exited {code} after {attempt.wall_s:.0f} s; fix what it "
+                    "printed and re-run the same reproduce command (finished stages are skipped)"
+                )
+            print(f"[reproduce] {stage.name}: {attempt.wall_s:.0f} s", flush=True)
+        return mine
 
 
 PAPER_S3_PICK_PLACE: dict[str, str] = {
@@ -444,7 +593,7 @@ def _fmt(mean: float | None, se: float | None) -> str:
     return "n/a" if mean is None or se is None else f"{mean:.2f} ± {se:.2f}"
 
 
-def write_summary(config: ReproduceConfig, timings: list[tuple[str, float]]) -> Path:
+def write_summary(config: ReproduceConfig) -> Path:
     """``OUT/report/reproduce.md``: scale vs the paper, our rows beside the paper's, costs."""
     from awda_bench.harness.results_store import STORE_NAME, ResultsStore
     from awda_bench.training.recipe import load_recipe
@@ -537,9 +686,17 @@ def write_summary(config: ReproduceConfig, timings: list[tuple[str, float]]) -> 
             f"| {m} | {n} | {r} | {g} | {success:.2f} | {steps:.0f} | {wall:.2f} | {act:.2f} | "
             f"{env:.2f} |"
         )
-    if timings:
-        lines += ["", "## Stage wall times (this invocation)", ""]
-        lines += [f"- {name}: {wall / 60:.1f} min" for name, wall in timings]
+    totals = stage_totals(read_stage_times(out))
+    if totals:
+        lines += [
+            "",
+            f"## Stage wall times (every invocation in this directory, from `{STAGE_TIMES}`)",
+            "",
+            "| stage | wall min | attempts | last attempt |",
+            "|---|---:|---:|---|",
+        ]
+        lines += [f"| {n} | {w / 60:.1f} | {k} | {last} |" for n, w, k, last in totals]
+        lines.append(f"| total | {sum(t[1] for t in totals) / 60:.1f} | | |")
     lines += [
         "",
         f"Store: `{out / 'runs' / STORE_NAME}`; tables: `report.md` beside this file.",

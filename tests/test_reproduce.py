@@ -1,15 +1,36 @@
-"""``reproduce``: the plan (stages, commands, estimates), what counts as done, and one-line
-refusals. The stages themselves are the tested ``collect``/``train``/``run``/``report`` commands."""
+"""``reproduce``: the plan (stages, commands, estimates), what counts as done, one-line refusals,
+and how stages run (the stage-time log across invocations, stopping, one invocation per
+directory). The stages themselves are the tested ``collect``/``train``/``run``/``report``
+commands."""
 
 from __future__ import annotations
 
+import fcntl
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
 
 from awda_bench.cli import main
-from awda_bench.reproduce import ReproduceConfig, parse_columns, plan_stages
+from awda_bench.errors import UsageError
+from awda_bench.reproduce import (
+    LOCK_FILE,
+    STAGE_TIMES,
+    ReproduceConfig,
+    Stage,
+    StageAttempt,
+    parse_columns,
+    plan_stages,
+    read_stage_times,
+    run_stages,
+    stage_totals,
+    write_stage_times,
+)
 
 
 def _plan(out: Path, **kw) -> dict[str, object]:
@@ -85,3 +106,125 @@ def test_bad_input_is_one_line_exit_2(
 
 def test_columns_parse_in_the_given_order() -> None:
     assert parse_columns("tosvi, full-1") == ("tosvi", "full-1")
+
+
+# --- running stages: the stage-time log, signals, one invocation per directory -----------------
+
+PYTHON_C = (sys.executable, "-c")
+
+
+def _stage(name: str, code: str, done: bool = False) -> Stage:
+    return Stage(name=name, argv=[code], estimate_s=1.0, done=done)
+
+
+def test_stage_times_add_up_over_invocations_and_name_the_failure(tmp_path: Path) -> None:
+    config = ReproduceConfig(suite="pick_place", out=tmp_path)
+    ok = _stage("collect train", "import time; time.sleep(0.2)")
+    bad = _stage("train full-1", "import sys; sys.exit(3)")
+    with pytest.raises(UsageError, match=r"stage 'train full-1' exited 3 after \d+ s"):
+        run_stages(config, [ok, bad], command=PYTHON_C)
+    first = read_stage_times(tmp_path)
+    assert [(a.stage, a.outcome) for a in first] == [
+        ("collect train", "finished"),
+        ("train full-1", "failed (exit 3)"),
+    ]
+    assert first[0].wall_s >= 0.2
+    # the re-run skips the finished stage and adds a second attempt at the failed one
+    ok.done = True
+    fixed = _stage("train full-1", "pass")
+    mine = run_stages(config, [ok, fixed], command=PYTHON_C)
+    assert [(a.stage, a.outcome) for a in mine] == [("train full-1", "finished")]
+    totals = {name: (n, last) for name, _, n, last in stage_totals(read_stage_times(tmp_path))}
+    assert totals == {"collect train": (1, "finished"), "train full-1": (2, "finished")}
+
+
+def test_a_running_attempt_left_by_a_killed_invocation_is_marked_killed(tmp_path: Path) -> None:
+    write_stage_times(
+        tmp_path, [StageAttempt("train tosvi", "2026-11-26T09:00:00+00:00", 90.0, "running")]
+    )
+    run_stages(
+        ReproduceConfig(suite="pick_place", out=tmp_path),
+        [_stage("report", "pass")],
+        command=PYTHON_C,
+    )
+    log = read_stage_times(tmp_path)
+    assert [(a.stage, a.wall_s, a.outcome) for a in log][0] == ("train tosvi", 90.0, "killed")
+    assert [a.outcome for a in log][1:] == ["finished"]
+
+
+def test_a_second_invocation_in_the_same_directory_is_refused(tmp_path: Path) -> None:
+    tmp_path.mkdir(exist_ok=True)
+    with open(tmp_path / LOCK_FILE, "a+") as held:
+        fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        held.write("4242")
+        held.flush()
+        with pytest.raises(UsageError, match=r"another reproduce \(pid 4242\) is running in"):
+            run_stages(
+                ReproduceConfig(suite="pick_place", out=tmp_path),
+                [_stage("x", "pass")],
+                command=PYTHON_C,
+            )
+    assert not (tmp_path / STAGE_TIMES).exists()
+
+
+def test_corrupt_stage_time_log_is_one_line_naming_the_file(tmp_path: Path) -> None:
+    (tmp_path / STAGE_TIMES).write_text("{not json")
+    with pytest.raises(UsageError, match=r"stage_times.json is not a stage-time log .* delete it"):
+        read_stage_times(tmp_path)
+
+
+SLEEPER = """
+import os, subprocess, sys, time
+from pathlib import Path
+grandchild = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+Path(sys.argv[1]).write_text(f"{os.getpid()} {grandchild.pid}")
+time.sleep(60)
+"""
+
+
+@pytest.mark.parametrize("stop", [signal.SIGTERM, signal.SIGINT])
+def test_stopping_reproduce_stops_the_stage_and_its_workers_and_logs_it(
+    tmp_path: Path, stop: signal.Signals
+) -> None:
+    pids = tmp_path / "pids"
+    driver = (
+        "import sys\n"
+        "from pathlib import Path\n"
+        "from awda_bench.errors import AwdaError\n"
+        "from awda_bench.reproduce import ReproduceConfig, Stage, run_stages\n"
+        f"stage = Stage('train full-1', [{SLEEPER!r}, {str(pids)!r}], 1.0, False)\n"
+        f"config = ReproduceConfig(suite='pick_place', out=Path({str(tmp_path)!r}))\n"
+        "try:\n"
+        "    run_stages(config, [stage], command=(sys.executable, '-c'))\n"
+        "except AwdaError as exc:\n"
+        "    print(exc, file=sys.stderr); sys.exit(exc.exit_code)\n"
+    )
+    parent = subprocess.Popen([sys.executable, "-c", driver], stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 30
+    while not (pids.is_file() and len(pids.read_text().split()) == 2):
+        assert time.monotonic() < deadline and parent.poll() is None, "stage never started"
+        time.sleep(0.05)
+    stage_pid, grandchild_pid = map(int, pids.read_text().split())
+    start = time.monotonic()
+    parent.send_signal(stop)
+    _, err = parent.communicate(timeout=20)
+    assert time.monotonic() - start < 10
+    assert parent.returncode == 128 + stop, err
+    assert "stopped stage 'train full-1'" in err and "re-run the same reproduce command" in err
+    for pid in (stage_pid, grandchild_pid):  # the whole group went, not only the parent
+        deadline = time.monotonic() + 5
+        while _alive(pid):
+            assert time.monotonic() < deadline, f"pid {pid} outlived reproduce"
+            time.sleep(0.05)
+    [attempt] = read_stage_times(tmp_path)
+    assert attempt.outcome == f"interrupted ({stop.name})" and attempt.wall_s > 0
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    # a zombie (exited, not yet reaped by its parent) counts as gone
+    stat = Path(f"/proc/{pid}/stat")
+    return stat.is_file() and stat.read_text().split()[2] != "Z"

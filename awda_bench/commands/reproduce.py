@@ -88,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
     print(format_plan(config, stages), flush=True)
     if config.dry_run:
         return 0
-    timings = run_stages(config, stages)
-    path = write_summary(config, timings)
+    run_stages(config, stages)
+    path = write_summary(config)
     print(f"[reproduce] done: {path}")
     return 0
