@@ -171,13 +171,31 @@ def _train_target(recipe_name: str, steps: int | None) -> int:
 
 
 def _training_done(ckpt: Path, target: int) -> bool:
+    return _steps_done(ckpt) >= target
+
+
+def _collect_remaining(collect_args: list[str]) -> int:
+    """Episodes ``collect`` would still record (all of them when nothing is there yet)."""
+    import argparse
+
+    from awda_bench.commands.collect import add_parser, config_from_args
+    from awda_bench.data.collect import collection_progress
+
+    parser = argparse.ArgumentParser()
+    add_parser(parser.add_subparsers())
+    already, planned = collection_progress(
+        config_from_args(parser.parse_args(["collect", *collect_args]))
+    )
+    return planned - already
+
+
+def _steps_done(ckpt: Path) -> int:
+    """The step of the last snapshot in ``ckpt`` (0 without one): where ``train`` resumes."""
     from awda_bench.models.snapshot import SNAPSHOT_PATTERN, list_snapshots
 
-    found = list_snapshots(ckpt)
-    if not found:
-        return False
-    match = SNAPSHOT_PATTERN.match(found[-1].name)
-    return match is not None and int(match.group(1)) >= target
+    found = list_snapshots(ckpt) if ckpt.is_dir() else []
+    match = SNAPSHOT_PATTERN.match(found[-1].name) if found else None
+    return int(match.group(1)) if match is not None else 0
 
 
 def _eval_remaining(run_args: list[str], checkpoints: Path | None) -> int | None:
@@ -258,33 +276,38 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
     from awda_bench.data.plan import split_tasks
 
     n_train = len(split_tasks(suite, "train")) * config.episodes_per_task * 2 + config.synthesize
+    train_argv = [
+        "collect", "--suite", config.suite, "--split", "train",
+        "--episodes-per-task", str(config.episodes_per_task),
+        "--synthesize", str(config.synthesize), "--out", str(data), *workers, *quiet,
+    ]  # fmt: skip
+    left_train = _collect_remaining(train_argv[1:])
     stages.append(
         Stage(
             "collect train",
-            [
-                "collect", "--suite", config.suite, "--split", "train",
-                "--episodes-per-task", str(config.episodes_per_task),
-                "--synthesize", str(config.synthesize), "--out", str(data), *workers, *quiet,
-            ],
-            n_train * COSTS.collect_episode_s * 2 / config.workers,
+            train_argv,
+            left_train * COSTS.collect_episode_s * 2 / config.workers,
             _collection_done(data, "train", config.episodes_per_task, config.synthesize),
-            f"{n_train} episodes",
+            f"{n_train} episodes" + (f", {left_train} left" if 0 < left_train < n_train else ""),
         )
     )  # fmt: skip
     val: list[str] = []
     if config.hold_out is None:
         n_test = len(suite.eval_tasks) * config.val_episodes_per_task * 2
+        test_argv = [
+            "collect", "--suite", config.suite, "--split", "test",
+            "--episodes-per-task", str(config.val_episodes_per_task),
+            "--out", str(test), *workers, *quiet,
+        ]  # fmt: skip
+        left_test = _collect_remaining(test_argv[1:])
         stages.append(
             Stage(
                 "collect test",
-                [
-                    "collect", "--suite", config.suite, "--split", "test",
-                    "--episodes-per-task", str(config.val_episodes_per_task),
-                    "--out", str(test), *workers, *quiet,
-                ],
-                n_test * COSTS.collect_episode_s * 2 / config.workers,
+                test_argv,
+                left_test * COSTS.collect_episode_s * 2 / config.workers,
                 _collection_done(test, "test", config.val_episodes_per_task, 0),
-                f"{n_test} validation episodes",
+                f"{n_test} validation episodes"
+                + (f", {left_test} left" if 0 < left_test < n_test else ""),
             )
         )  # fmt: skip
         val = ["--val-data", str(test)]
@@ -311,8 +334,12 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         step_s = COSTS.train_step_s[column.arch] * factor
         stages.append(
             Stage(
-                f"train {key}", argv, target * step_s, _training_done(ckpt, target),
-                f"{column.name}: {target} steps",
+                f"train {key}",
+                argv,
+                max(0, target - _steps_done(ckpt)) * step_s,
+                _training_done(ckpt, target),
+                f"{column.name}: {target} steps"
+                + (f", resumes at {done}" if 0 < (done := _steps_done(ckpt)) < target else ""),
             )
         )  # fmt: skip
         method = EVAL_METHOD[column.arch]

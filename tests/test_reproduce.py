@@ -228,3 +228,38 @@ def _alive(pid: int) -> bool:
     # a zombie (exited, not yet reaped by its parent) counts as gone
     stat = Path(f"/proc/{pid}/stat")
     return stat.is_file() and stat.read_text().split()[2] != "Z"
+
+
+def test_a_resumed_plan_estimates_only_what_is_left(tmp_path: Path) -> None:
+    from awda_bench.data.config import CollectConfig
+    from awda_bench.data.plan import make_plan
+    from awda_bench.data.trajectory_file import shard_dir
+    from awda_bench.reproduce import COSTS
+
+    fresh = _plan(tmp_path, columns=("full-1",), steps=100)
+    assert fresh["train full-1"].estimate_s == pytest.approx(100 * COSTS.train_step_s["awda"])  # type: ignore[attr-defined]
+    # 40 of 100 steps trained: train resumes from the last snapshot
+    ckpt = tmp_path / "checkpoints" / "full-1"
+    ckpt.mkdir(parents=True)
+    (ckpt / "snapshot-000000040.pt").write_bytes(b"")
+    resumed = _plan(tmp_path, columns=("full-1",), steps=100)
+    assert resumed["train full-1"].estimate_s == pytest.approx(60 * COSTS.train_step_s["awda"])  # type: ignore[attr-defined]
+    assert resumed["train full-1"].detail.endswith("100 steps, resumes at 40")  # type: ignore[attr-defined]
+    # 3 kept shards (and a killed run's temporary file) in one unit of the train collection
+    data = tmp_path / "data" / "train"
+    config = CollectConfig(
+        suite="pick_place", split="train", embodiment="both", episodes_per_task=20, out=data,
+        synthesize=200,
+    )  # fmt: skip
+    unit = make_plan(config).units[0]
+    shards = shard_dir(data, unit.name)
+    shards.mkdir(parents=True)
+    for attempt in range(3):
+        (shards / f"a{attempt:05d}.h5").write_bytes(b"")
+    (shards / ".a00003.h5.tmp").write_bytes(b"")
+    before = fresh["collect train"].estimate_s  # type: ignore[attr-defined]
+    again = _plan(tmp_path, columns=("full-1",), steps=100)["collect train"]
+    assert again.estimate_s == pytest.approx(before * (760 - 3) / 760)  # type: ignore[attr-defined]
+    assert again.detail == "760 episodes, 757 left"  # type: ignore[attr-defined]
+    # planning only reads: the temporary file of a collection that may still be running stays
+    assert (shards / ".a00003.h5.tmp").is_file()

@@ -31,6 +31,7 @@ from awda_bench.data.pool import InlineRunner, JobResult, JobRunner, ProcessRunn
 from awda_bench.data.trajectory_file import (
     consolidate_unit,
     discard_path,
+    kept_shard_count,
     load_unit_json,
     read_shard_meta,
     scan_unit,
@@ -184,6 +185,19 @@ class _UnitState:
             max_attempts=plan.max_attempts(self.unit, config.max_attempts_factor),
             chunk=config.chunk_episodes,
         )
+
+
+def collection_progress(config: CollectConfig) -> tuple[int, int]:
+    """``(episodes already kept toward the plan, episodes planned)`` in ``config.out``: what a
+    resumed ``collect`` starts its progress bar from, read without writing or opening a shard."""
+    plan = make_plan(config)
+    already = 0
+    for unit in plan.units:
+        if unit_is_complete(config.out, unit.name, unit.planned):
+            already += unit.planned
+        else:
+            already += min(kept_shard_count(config.out, unit.name), unit.planned)
+    return already, sum(u.planned for u in plan.units)
 
 
 def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> CollectResult:

@@ -181,6 +181,18 @@ def scan_unit(root: Path, unit_name: str) -> tuple[dict[int, Path], set[int]]:
     return kept, discarded
 
 
+def kept_shard_count(root: Path, unit_name: str) -> int:
+    """How many kept shards an unfinished unit has, by name alone: read-only (unlike
+    :func:`scan_unit`, it neither removes temporary files nor opens a shard), so a plan may call
+    it while a collection writes there."""
+    directory = shard_dir(root, unit_name)
+    if not directory.is_dir():
+        return 0
+    return sum(
+        1 for p in directory.iterdir() if p.name.endswith(".h5") and not p.name.startswith(".")
+    )
+
+
 def unit_paths(root: Path, unit_name: str) -> tuple[Path, Path]:
     """``(h5, json)`` of a finished unit."""
     return root / f"{unit_name}.h5", root / f"{unit_name}.json"
