@@ -170,21 +170,22 @@ def _train_target(recipe_name: str, steps: int | None) -> int:
     return steps if steps is not None else load_recipe(recipe_name).train.max_steps
 
 
-def _training_done(ckpt: Path, target: int) -> bool:
-    return _steps_done(ckpt) >= target
+def _parse_stage_args(add_parser: Any, command: str, args: list[str]) -> Any:
+    """``args`` parsed by ``command``'s own parser, as the stage's subprocess will parse them."""
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    add_parser(parser.add_subparsers())
+    return parser.parse_args([command, *args])
 
 
 def _collect_remaining(collect_args: list[str]) -> int:
     """Episodes ``collect`` would still record (all of them when nothing is there yet)."""
-    import argparse
-
     from awda_bench.commands.collect import add_parser, config_from_args
     from awda_bench.data.collect import collection_progress
 
-    parser = argparse.ArgumentParser()
-    add_parser(parser.add_subparsers())
     already, planned = collection_progress(
-        config_from_args(parser.parse_args(["collect", *collect_args]))
+        config_from_args(_parse_stage_args(add_parser, "collect", collect_args))
     )
     return planned - already
 
@@ -206,11 +207,7 @@ def _eval_remaining(run_args: list[str], checkpoints: Path | None) -> int | None
 
     if checkpoints is not None and not _has_snapshots(checkpoints):
         return None
-    import argparse
-
-    parser = argparse.ArgumentParser()
-    add_parser(parser.add_subparsers())
-    args = parser.parse_args(["run", *run_args])
+    args = _parse_stage_args(add_parser, "run", run_args)
     try:
         plan = prepare_sweep(config_from_args(args))
     except UsageError:
@@ -332,14 +329,15 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         if config.threads is not None:
             argv += ["--threads", str(config.threads)]
         step_s = COSTS.train_step_s[column.arch] * factor
+        steps_done = _steps_done(ckpt)
         stages.append(
             Stage(
                 f"train {key}",
                 argv,
-                max(0, target - _steps_done(ckpt)) * step_s,
-                _training_done(ckpt, target),
+                max(0, target - steps_done) * step_s,
+                steps_done >= target,
                 f"{column.name}: {target} steps"
-                + (f", resumes at {done}" if 0 < (done := _steps_done(ckpt)) < target else ""),
+                + (f", resumes at {steps_done}" if 0 < steps_done < target else ""),
             )
         )  # fmt: skip
         method = EVAL_METHOD[column.arch]
@@ -351,7 +349,7 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         if config.episodes is not None:
             run_argv += ["--episodes", str(config.episodes)]
         n_eval = config.snapshots * episodes * units
-        trained = _training_done(ckpt, target)
+        trained = steps_done >= target
         # until training is done the snapshots to evaluate are not all there: plan all of them
         remaining = _eval_remaining(run_argv, ckpt) if trained else None
         stages.append(
