@@ -155,8 +155,8 @@ def record_videos(
                         )
     finally:
         executor.close()
-        if "demo_env" in demo_cache:
-            demo_cache["demo_env"].close()
+        for env in demo_cache.get("demo_envs", {}).values():
+            env.close()
     return written
 
 
