@@ -92,13 +92,16 @@ def record_demo(
     render_every: int = 2,
     frames: bool = True,
     env: Any = None,
+    fresh_scene: bool = False,
 ) -> tuple[np.ndarray | None, Trajectory]:
     """Run the scripted expert once; return ``(frames, trajectory)``.
 
     ``frames`` is ``(F, H, W, 3)`` uint8 (steps listed in ``trajectory.meta["frame_steps"]``) or
     None when ``frames=False``. ``env`` (from :func:`make_demo_env`, same suite and embodiment) is
-    reused when given. The episode ends ``SETTLE_STEPS`` after the expert is done, or at the
-    horizon.
+    reused when given; ``fresh_scene`` rebuilds its scene first (``reconfigure``), so the demo does
+    not depend on what the env played before (the evaluation's demos; a collection keeps its
+    histories by replay instead, see :class:`awda_bench.data.plan.CollectJob`). The episode ends
+    ``SETTLE_STEPS`` after the expert is done, or at the horizon.
     """
     if isinstance(suite, str):
         suite = load_suite(suite)
@@ -116,7 +119,9 @@ def record_demo(
             f"task {task} of suite {suite.name!r} runs in {env_id}, not in {env.spec.id}"
         )
     expert = make_expert(suite.name, embodiment)
-    obs, info = env.reset(seed=seed, options={"task": suite.task(task).reset_task})
+    obs, info = env.reset(
+        seed=seed, options={"task": suite.task(task).reset_task, "reconfigure": fresh_scene}
+    )
     spec = EpisodeSpec(suite=suite.name, task=task, episode=0, seed=seed, demo_seed=seed)
     expert.reset(EpisodeContext(env=base, spec=spec))
 
@@ -186,11 +191,11 @@ def demo_video_frames(
     """The demonstrator's video of ``(task, demo_seed)`` subsampled to ``count`` frames
     ``(count, H, W, 3)`` uint8, first and last included. ``envs`` caches the demo envs.
 
-    The last :data:`DEMO_VIDEO_CACHE_SIZE` videos are kept per process: a learned method's
-    snapshots are evaluated on the same episodes, so every snapshot of a worker sees the very same
-    demo (PhysX carries ~1e-3 rad of history from one episode of an env into the next, so a
-    re-recorded demo would differ by a pixel here and there) and the demonstrator runs once
-    per episode instead of once per snapshot.
+    Each demo is recorded in a rebuilt scene (``fresh_scene``), so it is the same whichever
+    worker records it and whatever that worker recorded before. The last
+    :data:`DEMO_VIDEO_CACHE_SIZE` videos are kept per process: a learned method's snapshots are
+    evaluated on the same episodes, so the demonstrator runs once per episode instead of once
+    per snapshot.
     """
     key = (suite.name, str(suite.path), task, demo_seed, count, render_every)
     cached = _DEMO_VIDEOS.get(key)
@@ -198,7 +203,9 @@ def demo_video_frames(
         _DEMO_VIDEOS.move_to_end(key)
         return cached.copy()
     env = demo_env_for(envs, suite, task, "demonstrator")
-    frames, _ = record_demo(suite, task, demo_seed, render_every=render_every, env=env)
+    frames, _ = record_demo(
+        suite, task, demo_seed, render_every=render_every, env=env, fresh_scene=True
+    )
     assert frames is not None
     index = np.linspace(0, len(frames) - 1, min(count, len(frames))).round().astype(int)
     video = frames[index]

@@ -19,8 +19,11 @@ from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.policies.base import EpisodeSpec
 from awda_bench.suites import Suite
 
-PROTOCOL_VERSION = 1
-"""Bumped whenever the harness changes how an episode is played or judged."""
+PROTOCOL_VERSION = 2
+"""Bumped whenever the harness changes how an episode is played or judged.
+
+2: every episode, and every demo it shows, starts in a rebuilt scene (no PhysX history from the
+worker's earlier episodes; see :mod:`awda_bench.harness.episode_runner`)."""
 
 EPISODE_UNITS = ("task", "family")
 """How ``episodes`` is counted: per held-out task, or per family with variations cycled."""
