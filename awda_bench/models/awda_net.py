@@ -8,6 +8,9 @@ Batch format (what a dataset's samples stack into; images RGB float in [0, 1], c
                                    trajectory[:, 0] is the TCP at o_1 (polylines start there)
     "head":        (B,) int64      0 = task-driven sample, 1 = synthesized (trajectory synthesis)
 
+With a frozen backbone, training batches carry its cached feature maps instead of the images:
+``"demo_features" (B, demo_frames, C, h, w)`` and ``"first_frame_features" (B, C, h, w)``.
+
 Output coordinate convention: waypoints live in whatever frame the ``trajectory`` targets are given
 in; this project's datasets use the ManiSkill **world frame, metres**, TCP position
 (``panda_hand_tcp``). The network emits xyz directly and k attribute logits;
@@ -24,6 +27,8 @@ from torch import nn
 
 from awda_bench.errors import UsageError
 from awda_bench.models.config import AwdaConfig
+from awda_bench.models.demo_to_scene import DemoToScene
+from awda_bench.models.frame_encoder import feature_map_size
 from awda_bench.models.trunk import VisualTrunk
 from awda_bench.models.waypoint_loss import multi_waypoint_sdtw_loss, split_waypoint_sets
 
@@ -32,6 +37,15 @@ if TYPE_CHECKING:
 
 HEAD_NAMES: tuple[str, ...] = ("task", "synthesized")
 """Head index -> name: 0 task-driven data, 1 trajectory synthesis."""
+
+
+def _camera(config: AwdaConfig) -> tuple[torch.Tensor, torch.Tensor, tuple[int, int]] | None:
+    if not config.camera_intrinsic:
+        return None
+    intrinsic = torch.tensor(config.camera_intrinsic, dtype=torch.float64).view(3, 3)
+    extrinsic = torch.tensor(config.camera_extrinsic, dtype=torch.float64).view(3, 4)
+    height, width = config.camera_size
+    return intrinsic, extrinsic, (int(height), int(width))
 
 
 class AwdaNet(nn.Module):
@@ -44,6 +58,25 @@ class AwdaNet(nn.Module):
         super().__init__()
         self.config = config
         self.trunk = VisualTrunk(config.trunk, load_backbone_weights)
+        trunk = config.trunk
+        self.scene_head: DemoToScene | None = None
+        if trunk.head == "demo-to-scene":
+            self.scene_head = DemoToScene(
+                channels=self.trunk.channels,
+                grid=feature_map_size(trunk, trunk.image_height_px, trunk.image_width_px),
+                demo_frames=trunk.demo_frames,
+                dim=trunk.attention_heads * trunk.attention_head_dim,
+                heads=trunk.attention_heads,
+                layers=trunk.attention_layers,
+                dropout=trunk.dropout,
+                hidden=config.head_hidden_dim,
+                waypoints=config.total_waypoints,
+                waypoint_dim=config.waypoint_dim,
+                num_heads=config.num_heads,
+                camera=_camera(config),
+                demo_reference=config.demo_reference_frame,
+            )
+            return
         out = config.total_waypoints * config.waypoint_dim
         self.heads = nn.ModuleList(
             nn.Sequential(
@@ -72,12 +105,25 @@ class AwdaNet(nn.Module):
                 f"got demo {tuple(demo.shape[-2:])}, first frame {tuple(first_frame.shape[-2:])}"
             )
         frames = torch.cat((demo, first_frame.unsqueeze(1)), dim=1)
-        features = self.trunk(frames)[:, -1]  # o_1 is the last time step
-        b = features.shape[0]
+        features = self.trunk.frame_features(frames)
+        return self.forward_features(features[:, :-1], features[:, -1], head)
+
+    def forward_features(
+        self, demo: torch.Tensor, first_frame: torch.Tensor, head: torch.Tensor
+    ) -> torch.Tensor:
+        """:meth:`forward` from backbone feature maps: ``demo (B, Td, C, h, w)``,
+        ``first_frame (B, C, h, w)`` (a frozen backbone's cached features, or the backbone's
+        output) -> raw waypoints ``(B, 15, 3 + k)``."""
+        cfg = self.config
+        b = first_frame.shape[0]
         if head.shape != (b,) or int(head.min()) < 0 or int(head.max()) >= cfg.num_heads:
             raise UsageError(
                 f"head indices must be shape ({b},) in [0, {cfg.num_heads}); got {head.tolist()}"
             )
+        if self.scene_head is not None:
+            return self.scene_head(demo, first_frame, head.long())
+        frames = torch.cat((demo, first_frame.unsqueeze(1)), dim=1)
+        features = self.trunk.temporal(frames)[:, -1]  # o_1 is the last time step
         all_heads = torch.stack([h(features) for h in self.heads], dim=1)  # (B, heads, out)
         chosen = all_heads[torch.arange(b, device=all_heads.device), head.long()]
         return chosen.view(b, cfg.total_waypoints, cfg.waypoint_dim)
@@ -87,7 +133,12 @@ class AwdaNet(nn.Module):
     ) -> tuple[torch.Tensor, dict[str, float]]:
         """The multi-waypoint Soft-DTW loss of a batch (format in the module docstring)."""
         cfg = self.config
-        waypoints = self(batch["demo"], batch["first_frame"], batch["head"])
+        if "demo_features" in batch:  # a frozen backbone's cached features
+            waypoints = self.forward_features(
+                batch["demo_features"], batch["first_frame_features"], batch["head"]
+            )
+        else:
+            waypoints = self(batch["demo"], batch["first_frame"], batch["head"])
         loss, per_set = multi_waypoint_sdtw_loss(
             waypoints,
             batch["trajectory"],

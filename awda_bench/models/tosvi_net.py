@@ -68,9 +68,13 @@ class TosviNet(nn.Module):
         self.depth_backbone: nn.Module | None = None
         self.depth_fusion: nn.Module | None = None
         if config.use_depth:
-            weights = config.trunk.backbone_weights if load_backbone_weights else "none"
+            # the depth branch is a ResNet-18 whatever the RGB trunk; with an EfficientNet trunk
+            # its ImageNet weights (a torchvision download) are not used: it starts at random
+            resnet_weights = config.trunk.backbone == "resnet18" and load_backbone_weights
+            weights = config.trunk.backbone_weights if resnet_weights else "none"
             self.depth_backbone = build_resnet18_features(weights, in_channels=1)
-            self.depth_fusion = nn.Conv2d(2 * FEATURE_CHANNELS, FEATURE_CHANNELS, kernel_size=1)
+            c = self.trunk.channels
+            self.depth_fusion = nn.Conv2d(c + FEATURE_CHANNELS, c, kernel_size=1)
 
     @property
     def arch(self) -> str:
@@ -125,14 +129,14 @@ class TosviNet(nn.Module):
         return depth_maps.mean(dim=(-2, -1)).view(b, s, FEATURE_CHANNELS)
 
     def _fuse_depth(self, features: torch.Tensor, depth_vec: torch.Tensor) -> torch.Tensor:
-        """RGB features ``(B, T, 512, h, w)`` + agent depth vectors ``(B, S, 512)`` -> fused."""
+        """RGB features ``(B, T, C, h, w)`` + agent depth vectors ``(B, S, 512)`` -> fused."""
         assert self.depth_fusion is not None
         b, t, c, h, w = features.shape
-        s = depth_vec.shape[1]
-        demo_zeros = depth_vec.new_zeros(b, t - s, c)
+        s, d = depth_vec.shape[1:]
+        demo_zeros = depth_vec.new_zeros(b, t - s, d)
         per_frame = torch.cat((demo_zeros, depth_vec), dim=1)  # (B, T, 512)
         stacked = torch.cat((features, per_frame[..., None, None].expand(-1, -1, -1, h, w)), dim=2)
-        fused = self.depth_fusion(stacked.reshape(b * t, 2 * c, h, w))
+        fused = self.depth_fusion(stacked.reshape(b * t, c + d, h, w))
         return fused.view(b, t, c, h, w)
 
     def forward(

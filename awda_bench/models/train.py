@@ -126,7 +126,9 @@ def train(
     snapshot_dir = Path(snapshot_dir)
     device = resolve_device(config.device)
     model.to(device)
-    optimizer = torch.optim.Adam(model.parameters(), lr=config.learning_rate)
+    # a frozen backbone has no gradient and gets no optimizer state
+    trainable = [p for p in model.parameters() if p.requires_grad]
+    optimizer = torch.optim.Adam(trainable, lr=config.learning_rate)
     result = TrainResult(start_step=0, end_step=0)
     existing = list_snapshots(snapshot_dir) if config.resume else []
     if existing:

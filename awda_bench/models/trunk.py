@@ -3,14 +3,17 @@
 Data flow for one sample of ``T`` frames (AWDA: 10 demo frames + o_1, so T = 11)::
 
     frames (T, 3, H, W) in [0, 1]
-      -> ImageNet normalization -> ResNet-18 conv1..layer4 (weights shared by all frames)
-      -> features (512, T, h, w)                     h, w = ceil(H/32), ceil(W/32)
+      -> the backbone (ResNet-18 conv1..layer4, or EfficientNet-Lite0 up to a stage; weights
+         shared by all frames; frozen when ``freeze_backbone``: awda_bench.models.frame_encoder)
+      -> features (C, T, h, w)     ResNet-18: C = 512, h, w = ceil(H/32), ceil(W/32)
       -> + sinusoidal encoding over the flattened (t, y, x) axis
       -> 2 x [SelfAttention3d: Conv3d Q/K/V, 4 heads, dropout, residual, BatchNorm3d]
       -> spatial softmax -> (T, 1024) keypoints
       -> 2-layer MLP (hidden 256) per frame -> (T, feature_dim)
 
-The caller picks the time step it needs (AWDA: the last one, o_1's).
+The caller picks the time step it needs (AWDA: the last one, o_1's). With ``head =
+"demo-to-scene"`` the trunk stops at the backbone and AWDA's head takes the feature maps
+(:mod:`awda_bench.models.demo_to_scene`).
 """
 
 from __future__ import annotations
@@ -19,49 +22,65 @@ import torch
 from torch import nn
 
 from awda_bench.models.attention import SelfAttention3d, SpaceTimePositionalEncoding, SpatialSoftmax
-from awda_bench.models.backbone import FEATURE_CHANNELS, ImageNormalizer, build_resnet18_features
 from awda_bench.models.config import TrunkConfig
+from awda_bench.models.frame_encoder import build_frame_encoder
 
 
 class VisualTrunk(nn.Module):
-    """ResNet-18 features + space-time self-attention + spatial softmax + per-frame MLP."""
+    """Backbone features (+ for the ``self-attention`` head: space-time self-attention, spatial
+    softmax and a per-frame MLP)."""
 
     def __init__(self, config: TrunkConfig, load_backbone_weights: bool = True) -> None:
         """``load_backbone_weights=False`` skips reading ``config.backbone_weights`` (random init),
         for models whose weights come from a snapshot next."""
         super().__init__()
         self.config = config
-        self.normalize = ImageNormalizer()
-        weights = config.backbone_weights if load_backbone_weights else "none"
-        self.backbone = build_resnet18_features(weights, in_channels=3)
-        self.positional = SpaceTimePositionalEncoding()
-        self.attention = nn.Sequential(
-            *(
-                SelfAttention3d(
-                    FEATURE_CHANNELS,
-                    config.attention_heads,
-                    config.attention_head_dim,
-                    config.dropout,
+        self.normalize, self.backbone, channels = build_frame_encoder(config, load_backbone_weights)
+        self.channels = channels
+        """Channels of the backbone's feature map."""
+        if config.freeze_backbone:
+            self.backbone.requires_grad_(False)
+        if config.head == "self-attention":
+            self.positional = SpaceTimePositionalEncoding()
+            self.attention = nn.Sequential(
+                *(
+                    SelfAttention3d(
+                        channels,
+                        config.attention_heads,
+                        config.attention_head_dim,
+                        config.dropout,
+                    )
+                    for _ in range(config.attention_layers)
                 )
-                for _ in range(config.attention_layers)
             )
-        )
-        self.spatial_softmax = SpatialSoftmax()
-        self.mlp = nn.Sequential(
-            nn.Linear(2 * FEATURE_CHANNELS, config.hidden_dim),
-            nn.ReLU(),
-            nn.Linear(config.hidden_dim, config.feature_dim),
-        )
+            self.spatial_softmax = SpatialSoftmax()
+            self.mlp = nn.Sequential(
+                nn.Linear(2 * channels, config.hidden_dim),
+                nn.ReLU(),
+                nn.Linear(config.hidden_dim, config.feature_dim),
+            )
+
+    def train(self, mode: bool = True) -> VisualTrunk:
+        """A frozen backbone stays in eval mode (its batch-norm statistics are part of it)."""
+        super().train(mode)
+        if self.config.freeze_backbone:
+            self.backbone.eval()
+        return self
 
     def frame_features(self, frames: torch.Tensor) -> torch.Tensor:
-        """``(B, T, 3, H, W)`` RGB in [0, 1] -> ResNet features ``(B, T, 512, h, w)``."""
+        """``(B, T, 3, H, W)`` RGB in [0, 1] -> backbone features ``(B, T, C, h, w)``."""
         b, t = frames.shape[:2]
         flat = frames.reshape(b * t, *frames.shape[2:])
-        features = self.backbone(self.normalize(flat))
+        if self.config.freeze_backbone:
+            with torch.no_grad():
+                features = self.backbone(self.normalize(flat))
+        else:
+            features = self.backbone(self.normalize(flat))
         return features.reshape(b, t, *features.shape[1:])
 
     def temporal(self, features: torch.Tensor) -> torch.Tensor:
-        """``(B, T, 512, h, w)`` -> per-frame vectors ``(B, T, feature_dim)``."""
+        """``(B, T, C, h, w)`` -> per-frame vectors ``(B, T, feature_dim)`` (``self-attention``
+        head only; ``demo-to-scene`` reads the feature maps itself)."""
         volume = features.permute(0, 2, 1, 3, 4)  # (B, C, T, h, w)
         volume = self.attention(self.positional(volume))
         return self.mlp(self.spatial_softmax(volume))
