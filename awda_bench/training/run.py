@@ -24,22 +24,26 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import torch
 from torch.utils.data import default_collate
 
+from awda_bench.data.config import ROLE_AGENT
 from awda_bench.data.datasets import AwdaPairDataset, CollectedData, Selection, TosviDataset
 from awda_bench.errors import ProtocolMismatchError, UnknownChoiceError, UsageError
 from awda_bench.models.architectures import build_model
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig, TosviConfig, TrainConfig, TrunkConfig
+from awda_bench.models.frame_encoder import build_frame_encoder
 from awda_bench.models.tosvi_net import TosviNet
 from awda_bench.models.train import SampleDataset, TrainResult, resolve_device, train
 from awda_bench.training.augment import BatchTreatment
 from awda_bench.training.columns import Column, column_for
+from awda_bench.training.feature_cache import load_or_build
+from awda_bench.training.feature_datasets import CachedAwdaPairs, frames_needed
 from awda_bench.training.logbook import Logbook, plot_learning_curve
 from awda_bench.training.recipe import Recipe, load_recipe
 
@@ -208,13 +212,36 @@ def check_checkpoint_dir(out: Path, record: dict[str, Any]) -> bool:
 
 
 # ----------------------------------------------------------------------------- pieces
-def model_config(recipe: Recipe, column: Column) -> AwdaConfig | TosviConfig:
+def agent_camera(data: CollectedData) -> dict[str, Any]:
+    """The ``camera_*`` fields of :class:`AwdaConfig` from the collection's agent camera (the
+    suite's third-person camera is fixed: one episode's is every episode's)."""
+    agents = data.select(ROLE_AGENT)
+    if not agents:
+        raise UsageError(f"{data.root} holds no agent episodes to read the camera from")
+    intrinsic, extrinsic = data.camera(agents[0])
+    size = data.manifest["definition"].get("image_size")
+    return {
+        "camera_intrinsic": tuple(float(v) for v in intrinsic.ravel()),
+        "camera_extrinsic": tuple(float(v) for v in extrinsic.ravel()),
+        "camera_size": tuple(int(v) for v in size),
+    }
+
+
+def model_config(
+    recipe: Recipe, column: Column, camera: dict[str, Any] | None = None
+) -> AwdaConfig | TosviConfig:
+    """The network ``column`` trains under ``recipe``; ``camera`` (:func:`agent_camera`) is what
+    the ``demo-to-scene`` head votes along."""
     m = recipe.model
     trunk = TrunkConfig(
         image_height_px=m.image_height_px,
         image_width_px=m.image_width_px,
         demo_frames=m.demo_frames,
+        backbone=m.backbone,
+        backbone_stride=m.backbone_stride,
+        freeze_backbone=m.freeze_backbone,
         backbone_weights=m.backbone_weights,
+        head=m.head,
         attention_layers=m.attention_layers,
         attention_heads=m.attention_heads,
         attention_head_dim=m.attention_head_dim,
@@ -225,13 +252,16 @@ def model_config(recipe: Recipe, column: Column) -> AwdaConfig | TosviConfig:
     if column.arch == "awda":
         return AwdaConfig(
             trunk=trunk,
+            head_hidden_dim=m.head_hidden_dim,
+            demo_reference_frame=m.demo_reference_frame,
             num_heads=column.num_heads,
             points_per_segment=m.points_per_segment,
             gamma=m.gamma,
             attribute_scale=m.attribute_scale,
+            **(camera if camera is not None and m.head == "demo-to-scene" else {}),
         )
     return TosviConfig(
-        trunk=trunk,
+        trunk=replace(trunk, head="self-attention"),  # T-OSVI reads every frame's keypoints
         frame_stack=m.frame_stack,
         mixture_components=m.mixture_components,
         use_depth=column.arch == "tosvi-depth",
@@ -272,6 +302,21 @@ def make_dataset(
         include_synthesized=synthesized,
         allow_test=validation,
     )
+
+
+def with_cached_features(
+    dataset: AwdaPairDataset, recipe: Recipe, column: Column, progress: bool
+) -> CachedAwdaPairs:
+    """``dataset`` served from the frozen backbone's feature cache (built first if needed)."""
+    trunk = model_config(recipe, column).trunk
+    normalize, backbone, _ = build_frame_encoder(trunk, load_weights=True)
+    backbone.eval()
+
+    def encode(images: torch.Tensor) -> torch.Tensor:
+        return backbone(normalize(images))
+
+    cache = load_or_build(dataset.data, trunk, frames_needed(dataset), encode, progress=progress)
+    return CachedAwdaPairs(dataset, cache)
 
 
 class OneHead:
@@ -350,12 +395,21 @@ def run_training(request: TrainRequest) -> TrainOutcome:
             raise UsageError(
                 f"--val-data {request.val_data} is from another suite than --data {request.data}"
             )
-    dataset = make_dataset(data, recipe, column, selection, synthesized=column.synthesized)
-    val_dataset = (
+    if request.threads is not None:
+        torch.set_num_threads(request.threads)
+    dataset: SampleDataset = make_dataset(
+        data, recipe, column, selection, synthesized=column.synthesized
+    )
+    val_dataset: SampleDataset | None = (
         make_dataset(val_data, recipe, column, val_selection, synthesized=False, validation=True)
         if val_data is not None
         else None
     )
+    if column.arch == "awda" and recipe.model.freeze_backbone:
+        assert isinstance(dataset, AwdaPairDataset)
+        dataset = with_cached_features(dataset, recipe, column, request.progress)
+        if isinstance(val_dataset, AwdaPairDataset):
+            val_dataset = with_cached_features(val_dataset, recipe, column, request.progress)
     train_set: SampleDataset = dataset
     if column.arch == "awda" and column.num_heads == 1:
         train_set = OneHead(dataset)
@@ -399,11 +453,9 @@ def run_training(request: TrainRequest) -> TrainOutcome:
     request.out.mkdir(parents=True, exist_ok=True)
     _write_json(request.out / TRAIN_JSON, {**record, "device": device.type})
 
-    if request.threads is not None:
-        torch.set_num_threads(request.threads)
     t = recipe.train
     torch.manual_seed(t.seed)  # initial weights (a resumed run loads them from its snapshot)
-    model = build_model(model_config(recipe, column))
+    model = build_model(model_config(recipe, column, agent_camera(data)))
     config = TrainConfig(
         learning_rate=t.learning_rate,
         batch_size=t.batch_size,

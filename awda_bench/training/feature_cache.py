@@ -1,0 +1,216 @@
+"""Frozen-backbone features of a collection's frames, encoded once and kept on disk.
+
+When a recipe freezes the backbone (``model.freeze_backbone = true``), a training step never needs
+the images, only their feature maps: ``train`` encodes every frame its datasets read once, here,
+and the loop runs the attention layers and heads over the cached maps (a few percent of a step
+through the backbone). Evaluation encodes each live frame with the same frozen backbone, which the
+snapshot carries, so training and evaluation see the same features.
+
+Where and what::
+
+    DATA_DIR/features/<key>.h5      key = sha256(format version, collection fingerprint, backbone,
+                                                 stride, weights, image size, variant)[:16]
+        attrs: key, meta (JSON of what the key hashes), complete (written last)
+        <unit path>/<traj>/indices   (n,) int64           state indices encoded
+        <unit path>/<traj>/features  (n, C, h, w) float16 the backbone's map of each, fletcher32
+
+Changing the trunk, its stage or the image size gives another key, hence another file. The file
+is written as ``<key>.h5.partial`` (episodes appended; an interrupted build resumes where it
+stopped) and renamed when complete; a dataset needing episodes the file lacks (validation pairs of
+the same collection, say) appends them the same way. Every dataset carries HDF5's Fletcher-32 checksum, and the
+whole cache is read into memory when opened: a damaged file (truncated, flipped bytes, missing
+episodes) is found then, reported on one line, deleted and rebuilt, never read as data.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import torch
+
+from awda_bench.data.datasets import CollectedData, EpisodeRef, frames_tensor
+from awda_bench.errors import CorruptFileError
+from awda_bench.models.config import TrunkConfig
+
+log = logging.getLogger(__name__)
+
+FORMAT_VERSION = 1
+"""Bumped whenever what a cache file holds changes meaning."""
+
+CACHE_DIR = "features"
+"""Sub-directory of DATA_DIR holding the caches."""
+
+ENCODE_BATCH = 32
+"""Frames per backbone call while encoding."""
+
+Encoder = Callable[[torch.Tensor], torch.Tensor]
+"""RGB ``(N, 3, H, W)`` in [0, 1] -> features ``(N, C, h, w)``."""
+
+
+def cache_meta(fingerprint: str, trunk: TrunkConfig, variant: str = "rgb") -> dict[str, Any]:
+    """What a cache's key is the hash of."""
+    return {
+        "format": FORMAT_VERSION,
+        "collection": fingerprint,
+        "backbone": trunk.backbone,
+        "stride": trunk.backbone_stride,
+        "weights": trunk.backbone_weights,
+        "image_size": [trunk.image_height_px, trunk.image_width_px],
+        "variant": variant,
+    }
+
+
+def cache_key(meta: Mapping[str, Any]) -> str:
+    blob = json.dumps(dict(meta), sort_keys=True, separators=(",", ":")).encode()
+    return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def episode_name(data: CollectedData, ref: EpisodeRef) -> str:
+    """The group an episode's features live in."""
+    return f"{ref.file.relative_to(data.root).with_suffix('').as_posix()}/{ref.traj}"
+
+
+class FeatureCache:
+    """The in-memory features of one cache file: ``features(ref, indices) -> (n, C, h, w)``."""
+
+    def __init__(self, path: Path, entries: dict[str, tuple[np.ndarray, torch.Tensor]]) -> None:
+        self.path = path
+        self._entries = entries
+
+    def __len__(self) -> int:
+        return len(self._entries)
+
+    def features(self, name: str, indices: np.ndarray) -> torch.Tensor:
+        """float32 ``(len(indices), C, h, w)`` for the episode ``name`` at state ``indices``."""
+        try:
+            stored, maps = self._entries[name]
+        except KeyError as exc:
+            raise CorruptFileError(
+                f"feature cache {self.path} lacks episode {name}; delete the file, "
+                "train rebuilds it"
+            ) from exc
+        rows = np.searchsorted(stored, indices)
+        if np.any(rows >= len(stored)) or np.any(
+            stored[np.minimum(rows, len(stored) - 1)] != indices
+        ):
+            raise CorruptFileError(
+                f"feature cache {self.path} lacks frames {indices.tolist()} of {name}; delete "
+                "the file, train rebuilds it"
+            )
+        return maps[torch.from_numpy(rows)].float()
+
+
+class _MissingEpisodes(Exception):
+    """A sound cache file that lacks episodes another dataset of the collection needs."""
+
+
+def _read(path: Path, key: str, wanted: Mapping[str, np.ndarray]) -> FeatureCache:
+    """Read and check a complete cache file; any defect raises :class:`CorruptFileError`."""
+    entries: dict[str, tuple[np.ndarray, torch.Tensor]] = {}
+    try:
+        with h5py.File(path, "r") as f:
+            if f.attrs.get("key") != key or not f.attrs.get("complete"):
+                raise CorruptFileError(f"feature cache {path} is incomplete or has another key")
+            if any(name not in f for name in wanted):
+                raise _MissingEpisodes(path)
+            for name, indices in wanted.items():
+                group = f[name]
+                stored = np.asarray(group["indices"][()], dtype=np.int64)
+                if not np.array_equal(stored, indices):
+                    raise CorruptFileError(f"feature cache {path}: {name} holds other frames")
+                entries[name] = (stored, torch.from_numpy(np.asarray(group["features"][()])))
+    except (CorruptFileError, _MissingEpisodes):
+        raise
+    except (OSError, KeyError, ValueError, TypeError) as exc:  # fletcher32 mismatch is an OSError
+        raise CorruptFileError(
+            f"feature cache {path} is damaged ({type(exc).__name__}: {exc})"
+        ) from exc
+    return FeatureCache(path, entries)
+
+
+def _encode_into(
+    path: Path,
+    key: str,
+    meta: Mapping[str, Any],
+    data: CollectedData,
+    refs: Mapping[str, tuple[EpisodeRef, np.ndarray]],
+    encoder: Encoder,
+    image_size: tuple[int, int],
+    progress: bool,
+) -> None:
+    """Append every missing episode's features to the partial file ``path``."""
+    from tqdm import tqdm
+
+    with h5py.File(path, "a") as f:
+        if f.attrs.get("key") not in (None, key):
+            raise CorruptFileError(f"partial feature cache {path} has another key")
+        f.attrs["key"] = key
+        f.attrs["meta"] = json.dumps(dict(meta), sort_keys=True)
+        todo = [n for n in refs if not (n in f and f[n].attrs.get("done"))]
+        frames_total = sum(len(refs[n][1]) for n in todo)
+        bar = tqdm(total=frames_total, disable=not progress, unit="frame", desc="encode features")
+        for name in todo:
+            ref, indices = refs[name]
+            images = frames_tensor(data.frames(ref, indices), image_size)
+            with torch.no_grad():
+                maps = torch.cat(
+                    [
+                        encoder(images[i : i + ENCODE_BATCH])
+                        for i in range(0, len(images), ENCODE_BATCH)
+                    ]
+                )
+            if name in f:
+                del f[name]
+            group = f.create_group(name)
+            group.create_dataset("indices", data=indices, fletcher32=True)
+            group.create_dataset("features", data=maps.half().numpy(), fletcher32=True, chunks=True)
+            group.attrs["done"] = True
+            bar.update(len(indices))
+        bar.close()
+        f.attrs["complete"] = True
+
+
+def load_or_build(
+    data: CollectedData,
+    trunk: TrunkConfig,
+    frames: Sequence[tuple[EpisodeRef, np.ndarray]],
+    encoder: Encoder,
+    *,
+    variant: str = "rgb",
+    progress: bool = True,
+) -> FeatureCache:
+    """The cache of ``frames`` ((episode, sorted state indices) pairs) for ``trunk`` over ``data``:
+    read when present and sound, otherwise (re)built with ``encoder`` first."""
+    meta = cache_meta(data.fingerprint, trunk, variant)
+    key = cache_key(meta)
+    folder = data.root / CACHE_DIR
+    path = folder / f"{key}.h5"
+    refs = {episode_name(data, ref): (ref, np.asarray(idx, np.int64)) for ref, idx in frames}
+    wanted = {name: idx for name, (_, idx) in refs.items()}
+    partial = path.with_name(path.name + ".partial")
+    if path.is_file():
+        try:
+            return _read(path, key, wanted)
+        except _MissingEpisodes:  # another dataset of this collection: encode what it adds
+            os.replace(path, partial)
+        except CorruptFileError as exc:
+            log.warning("%s; rebuilding it", exc)
+            path.unlink()
+    folder.mkdir(exist_ok=True)
+    size = (trunk.image_height_px, trunk.image_width_px)
+    try:
+        _encode_into(partial, key, meta, data, refs, encoder, size, progress)
+    except (OSError, CorruptFileError) as exc:  # a damaged partial file: start it again
+        log.warning("partial feature cache %s unusable (%s); encoding again", partial, exc)
+        partial.unlink(missing_ok=True)
+        _encode_into(partial, key, meta, data, refs, encoder, size, progress)
+    os.replace(partial, path)
+    return _read(path, key, wanted)
