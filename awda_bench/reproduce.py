@@ -84,6 +84,11 @@ class Costs:
         default_factory=lambda: {"awda": 2.23, "tosvi": 3.16, "tosvi-depth": 4.7}
     )
     """Per step of the ``small`` recipe, 2 threads (``recipes/small.toml`` has the measurements)."""
+    frozen_step_s: float = 0.8
+    """Per step of a frozen-backbone recipe over cached features (``small``: 0.5-0.6 s alone,
+    0.75-0.84 s beside another job; batch 16, 2 threads, 2026-12-02)."""
+    encode_frame_s: float = 0.077
+    """Encoding one 240x320 frame into the feature cache (5,080 frames in ~6.5 min, busy)."""
     paper_step_factor: float = 32.0
     """``paper`` recipe step cost ÷ ``small``'s on a CPU (~71 s vs 2.23 s)."""
     eval_episode_s: dict[str, float] = field(
@@ -309,6 +314,9 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         )  # fmt: skip
         val = ["--val-data", str(test)]
     target = _train_target(config.recipe, config.steps)
+    from awda_bench.training.recipe import load_recipe
+
+    frozen = load_recipe(config.recipe).model.freeze_backbone
     factor = COSTS.paper_step_factor if config.recipe == "paper" else 1.0
     tasks, units = _eval_tasks(config.suite, config.hold_out)
     episodes = config.episodes if config.episodes is not None else suite.episodes_per_task
@@ -328,13 +336,20 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             argv += ["--steps", str(config.steps)]
         if config.threads is not None:
             argv += ["--threads", str(config.threads)]
-        step_s = COSTS.train_step_s[column.arch] * factor
+        step_s, encode_s = COSTS.train_step_s[column.arch] * factor, 0.0
+        if frozen and column.arch == "awda":  # cached features; the cache is encoded once
+            step_s = COSTS.frozen_step_s
+            if not any((data / "features").glob("*.h5")):
+                # o_1 of every agent episode, the demo frames of every demonstrator and
+                # synthesized one
+                pairs = (n_train - config.synthesize) / 2
+                encode_s = COSTS.encode_frame_s * (pairs * 11 + config.synthesize * 10)
         steps_done = _steps_done(ckpt)
         stages.append(
             Stage(
                 f"train {key}",
                 argv,
-                max(0, target - steps_done) * step_s,
+                max(0, target - steps_done) * step_s + (encode_s if steps_done == 0 else 0.0),
                 steps_done >= target,
                 f"{column.name}: {target} steps"
                 + (f", resumes at {steps_done}" if 0 < steps_done < target else ""),
