@@ -317,6 +317,12 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
     from awda_bench.training.recipe import load_recipe
 
     frozen = load_recipe(config.recipe).model.freeze_backbone
+    not_cached = [k for k in config.columns if frozen and COLUMN_KEYS[k].arch != "awda"]
+    if not_cached:
+        raise UsageError(
+            f"recipe {config.recipe!r} trains over cached frozen-backbone features, which only "
+            f"AWDA columns have so far; run {', '.join(not_cached)} with --recipe small-scratch"
+        )
     factor = COSTS.paper_step_factor if config.recipe == "paper" else 1.0
     tasks, units = _eval_tasks(config.suite, config.hold_out)
     episodes = config.episodes if config.episodes is not None else suite.episodes_per_task

@@ -33,9 +33,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     parser.add_argument(
         "--columns",
-        default=",".join(DEFAULT_COLUMNS),
+        default=None,
         help=f"comma-separated Table S3 columns among {', '.join(COLUMN_KEYS)} "
-        f"(default {','.join(DEFAULT_COLUMNS)})",
+        f"(default {','.join(DEFAULT_COLUMNS)}; full-1 alone with a frozen-backbone recipe such "
+        "as small, whose cached features only AWDA columns have so far)",
     )
     parser.add_argument(
         "--hold-out", default=None, metavar="FAMILY", help="MOSAIC: the held-out family"
@@ -67,11 +68,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def run(args: argparse.Namespace) -> int:
     out = args.out or Path("runs") / f"reproduce-{args.suite}-{Path(args.recipe).stem}"
+    columns = args.columns
+    if columns is None:
+        from awda_bench.training.recipe import load_recipe
+
+        frozen = load_recipe(args.recipe).model.freeze_backbone
+        columns = "full-1" if frozen else ",".join(DEFAULT_COLUMNS)
     config = ReproduceConfig(
         suite=args.suite,
         out=out,
         recipe=args.recipe,
-        columns=parse_columns(args.columns),
+        columns=parse_columns(columns),
         hold_out=args.hold_out,
         workers=args.workers,
         episodes_per_task=args.episodes_per_task,

@@ -376,6 +376,14 @@ def run_training(request: TrainRequest) -> TrainOutcome:
     column = column_for(request.method, request.ablation)
     recipe = load_recipe(request.recipe).with_schedule(request.steps, request.snapshot_every)
     device = resolve_device(request.device)
+    if recipe.model.freeze_backbone and column.arch != "awda":
+        # T-OSVI reads a 6-frame stack at every step of every agent episode: its features are not
+        # cached yet, and through the backbone at 240x320 a step would take minutes here
+        raise UsageError(
+            f"recipe {recipe.name!r} freezes the backbone and trains over cached features, which "
+            f"only AWDA columns have so far; train {column.slug} with --recipe small-scratch "
+            "(or paper on a GPU)"
+        )
     data = open_data(request.data, recipe, column, "--data")
     if data.split != "train":
         raise UsageError(

@@ -1,0 +1,121 @@
+"""Diagnostic for the recipe study: can the demo-to-scene head find the demonstrated object in
+o_1 when told directly where it is? Waypoint 0 (the 1-waypoint set) is regressed onto the true
+grasp point (smooth L1, cm) instead of the Soft-DTW loss; batch 16, Adam 5e-4, frozen Lite0
+stride-16 features from the project's cache.
+
+usage: python scripts/screening/direct_grasp.py ref|noref STEPS TRAIN_DATA TEST_DATA
+"""
+
+import sys
+import time
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from awda_bench.data.datasets import AwdaPairDataset, CollectedData
+from awda_bench.models.awda_net import AwdaNet
+from awda_bench.models.config import AwdaConfig, TrunkConfig
+from awda_bench.models.frame_encoder import build_frame_encoder
+from awda_bench.training.feature_cache import load_or_build
+from awda_bench.training.feature_datasets import CachedAwdaPairs, frames_needed
+from awda_bench.training.run import agent_camera
+
+torch.set_num_threads(2)
+torch.manual_seed(0)
+ref = sys.argv[1] == "ref"
+steps = int(sys.argv[2])
+T = TrunkConfig(
+    image_height_px=240,
+    image_width_px=320,
+    backbone="efficientnet-lite0",
+    backbone_stride=16,
+    freeze_backbone=True,
+    backbone_weights="imagenet",
+    head="demo-to-scene",
+    attention_head_dim=32,
+)
+OBJ = ["milk", "bread", "cereal", "can"]
+
+
+def load(path):
+    data = CollectedData(path)
+    pairs = AwdaPairDataset(data, image_size=(240, 320), include_synthesized=False, allow_test=True)
+    n, b, _ = build_frame_encoder(T, True)
+    cache = load_or_build(data, T, frames_needed(pairs), lambda x: b(n(x)), progress=False)
+    ds = CachedAwdaPairs(pairs, cache)
+    info = {}
+    for a, _, _ in pairs.pairs:
+        k = (str(a.file), a.traj)
+        if k not in info:
+            g = data.attributes(a, ("grasp",))[:, 0] > 0.5
+            info[k] = (
+                data.tcp_pos(a)[np.flatnonzero(g)[0]],
+                np.stack([data._read(a, f"env_states/actors/{o}", 0)[:3] for o in OBJ]),
+                a.task,
+            )
+    return data, pairs, ds, info
+
+
+data, tp, tr, tinfo = load(sys.argv[3])
+_, hp, he, hinfo = load(sys.argv[4])
+model = AwdaNet(
+    AwdaConfig(trunk=T, head_hidden_dim=128, demo_reference_frame=ref, **agent_camera(data))
+)
+opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], 5e-4)
+
+
+def batch(ds, pairs, info, idx):
+    s = [ds[int(i)] for i in idx]
+    g = torch.tensor(
+        np.stack(
+            [info[(str(pairs.pairs[int(i)][0].file), pairs.pairs[int(i)][0].traj)][0] for i in idx]
+        ),
+        dtype=torch.float32,
+    )
+    return (
+        torch.stack([x["demo_features"] for x in s]),
+        torch.stack([x["first_frame_features"] for x in s]),
+        g,
+    )
+
+
+def evaluate(ds, pairs, info, n=300):
+    model.eval()
+    rng = np.random.default_rng(0)
+    idx = rng.choice(len(ds), n, replace=False)
+    errs, hit = [], []
+    with torch.no_grad():
+        for k in range(0, n, 50):
+            d, f, g = batch(ds, pairs, info, idx[k : k + 50])
+            w = model.forward_features(d, f, torch.zeros(len(g), dtype=torch.long))[:, 0, :3]
+            errs += ((w - g).norm(dim=1) * 100).tolist()
+            for i, q in zip(idx[k : k + 50], w.numpy(), strict=True):
+                _, objs, task = info[
+                    (str(pairs.pairs[int(i)][0].file), pairs.pairs[int(i)][0].traj)
+                ]
+                hit.append(int(np.argmin(np.linalg.norm(objs[:, :2] - q[:2], axis=1))) == task // 4)
+    model.train()
+    return f"median {np.median(errs):.1f} cm, nearest=target {np.mean(hit):.2f}"
+
+
+gen = torch.Generator().manual_seed(0)
+t0 = time.time()
+for step in range(1, steps + 1):
+    d, f, g = batch(tr, tp, tinfo, torch.randint(len(tr), (16,), generator=gen))
+    w = model.forward_features(d, f, torch.zeros(16, dtype=torch.long))[:, 0, :3]
+    loss = F.smooth_l1_loss(w * 100, g * 100)
+    opt.zero_grad()
+    loss.backward()
+    opt.step()
+    if step % 100 == 0:
+        print(
+            step,
+            f"{loss.item():.2f}",
+            f"{time.time() - t0:.0f}s",
+            "train:",
+            evaluate(tr, tp, tinfo),
+            "| held-out:",
+            evaluate(he, hp, hinfo),
+            flush=True,
+        )
