@@ -3,7 +3,10 @@ o_1 when told directly where it is? Waypoint 0 (the 1-waypoint set) is regressed
 grasp point (smooth L1, cm) instead of the Soft-DTW loss; batch 16, Adam 5e-4, frozen Lite0
 stride-16 features from the project's cache.
 
-usage: python scripts/screening/direct_grasp.py ref|noref STEPS TRAIN_DATA TEST_DATA
+usage: python scripts/screening/direct_grasp.py ref|noref|can STEPS TRAIN_DATA TEST_DATA
+
+``can``: localization alone, without identification: the horizontal position of the soda can
+(every scene has one) is the target, whatever the task.
 """
 
 import sys
@@ -23,7 +26,8 @@ from awda_bench.training.run import agent_camera
 
 torch.set_num_threads(2)
 torch.manual_seed(0)
-ref = sys.argv[1] == "ref"
+ref = sys.argv[1] in ("ref", "can")
+can_only = sys.argv[1] == "can"
 steps = int(sys.argv[2])
 T = TrunkConfig(
     image_height_px=240,
@@ -67,12 +71,12 @@ opt = torch.optim.Adam([p for p in model.parameters() if p.requires_grad], 5e-4)
 
 def batch(ds, pairs, info, idx):
     s = [ds[int(i)] for i in idx]
-    g = torch.tensor(
-        np.stack(
-            [info[(str(pairs.pairs[int(i)][0].file), pairs.pairs[int(i)][0].traj)][0] for i in idx]
-        ),
-        dtype=torch.float32,
-    )
+    keys = [(str(pairs.pairs[int(i)][0].file), pairs.pairs[int(i)][0].traj) for i in idx]
+    if can_only:  # the can's xy, at the mean grasp height
+        rows = [np.r_[info[k][1][3, :2], 0.15] for k in keys]
+    else:
+        rows = [info[k][0] for k in keys]
+    g = torch.tensor(np.stack(rows), dtype=torch.float32)
     return (
         torch.stack([x["demo_features"] for x in s]),
         torch.stack([x["first_frame_features"] for x in s]),
@@ -89,12 +93,13 @@ def evaluate(ds, pairs, info, n=300):
         for k in range(0, n, 50):
             d, f, g = batch(ds, pairs, info, idx[k : k + 50])
             w = model.forward_features(d, f, torch.zeros(len(g), dtype=torch.long))[:, 0, :3]
-            errs += ((w - g).norm(dim=1) * 100).tolist()
+            errs += ((w - g)[:, : 2 if can_only else 3].norm(dim=1) * 100).tolist()
             for i, q in zip(idx[k : k + 50], w.numpy(), strict=True):
                 _, objs, task = info[
                     (str(pairs.pairs[int(i)][0].file), pairs.pairs[int(i)][0].traj)
                 ]
-                hit.append(int(np.argmin(np.linalg.norm(objs[:, :2] - q[:2], axis=1))) == task // 4)
+                want = 3 if can_only else task // 4
+                hit.append(int(np.argmin(np.linalg.norm(objs[:, :2] - q[:2], axis=1))) == want)
     model.train()
     return f"median {np.median(errs):.1f} cm, nearest=target {np.mean(hit):.2f}"
 
@@ -104,7 +109,8 @@ t0 = time.time()
 for step in range(1, steps + 1):
     d, f, g = batch(tr, tp, tinfo, torch.randint(len(tr), (16,), generator=gen))
     w = model.forward_features(d, f, torch.zeros(16, dtype=torch.long))[:, 0, :3]
-    loss = F.smooth_l1_loss(w * 100, g * 100)
+    n = 2 if can_only else 3
+    loss = F.smooth_l1_loss(w[:, :n] * 100, g[:, :n] * 100)
     opt.zero_grad()
     loss.backward()
     opt.step()
