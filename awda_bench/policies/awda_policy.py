@@ -22,8 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.errors import CorruptFileError
+from awda_bench.errors import CorruptFileError, UsageError
 from awda_bench.models.awda_net import AwdaNet
+from awda_bench.models.config import AwdaConfig
 from awda_bench.policies.base import EpisodeContext
 from awda_bench.policies.gt_waypoints import robot_states
 from awda_bench.primitives.config import CENTRE_SUFFIX, ExecutorConfig, LocalizationConfig
@@ -57,6 +58,26 @@ def _resize(frames: np.ndarray, height: int, width: int) -> np.ndarray:
     if frames.shape[-3:-1] == (height, width):
         return frames
     return np.stack([cv2.resize(f, (width, height), interpolation=cv2.INTER_AREA) for f in frames])
+
+
+def check_camera(config: AwdaConfig, env: Any) -> None:
+    """A network whose waypoints are votes on its training camera's rays (``demo-to-scene`` with
+    a camera) refuses a scene whose third-person camera is another one."""
+    if not config.camera_intrinsic:
+        return
+    from awda_bench.robot.cameras import camera_params
+
+    intrinsic, extrinsic = camera_params(env)
+    want_k = np.asarray(config.camera_intrinsic).reshape(3, 3)
+    want_e = np.asarray(config.camera_extrinsic).reshape(3, 4)
+    if not (
+        np.allclose(intrinsic, want_k, atol=1e-2) and np.allclose(extrinsic, want_e, atol=1e-3)
+    ):
+        raise UsageError(
+            "this AWDA snapshot votes waypoints on the rays of the camera it was trained with, and "
+            "the scene's third-person camera differs; evaluate it on the suite it was trained on "
+            "(or retrain on data recorded with this camera)"
+        )
 
 
 class AWDAPolicy:
@@ -104,6 +125,7 @@ class AWDAPolicy:
                 suite, ctx.spec.task, ctx.spec.demo_seed, self._demo_envs, self.demo_frames
             )
             ctx.extras["demo_frames"] = list(demo)
+        check_camera(self.model.config, ctx.env)
         first = capture_rgb(ctx.env)[0]
         ctx.extras.setdefault("first_frame", first)
         h, w = self.image_size

@@ -66,6 +66,19 @@ def capture_rgb(env, uid: str = THIRD_PERSON_CAMERA) -> np.ndarray:
     return rgb.cpu().numpy().astype(np.uint8)
 
 
+def camera_params(env, uid: str = THIRD_PERSON_CAMERA) -> tuple[np.ndarray, np.ndarray]:
+    """Camera ``uid``'s ``intrinsic_cv`` (3, 3) and world-to-camera ``extrinsic_cv`` (3, 4) of env
+    0 (OpenCV conventions), as float64."""
+    params = _sensor(env, uid).get_params()
+    out = []
+    for key in ("intrinsic_cv", "extrinsic_cv"):
+        value = params[key]
+        if isinstance(value, torch.Tensor):
+            value = value.cpu().numpy()
+        out.append(np.asarray(value, dtype=np.float64).reshape(-1, *np.shape(value)[-2:])[0])
+    return out[0], out[1]
+
+
 def capture_wrist_depth(env, uid: str = WRIST_CAMERA) -> DepthFrame:
     """Render the wrist depth camera now."""
     sensor = _sensor(env, uid)
