@@ -589,9 +589,9 @@ def run_stages(
                         code = child.wait(timeout=HEARTBEAT_S)
                         break
                     except subprocess.TimeoutExpired:
-                        attempt.wall_s = round(time.perf_counter() - start, 1)
+                        attempt.wall_s = round(time.perf_counter() - start, 3)
                         write_stage_times(config.out, log)
-            attempt.wall_s = round(time.perf_counter() - start, 1)
+            attempt.wall_s = round(time.perf_counter() - start, 3)
             if received:
                 name = signal.Signals(received[0]).name
                 attempt.outcome = f"interrupted ({name})"

@@ -40,7 +40,8 @@ def _plan(out: Path, **kw) -> dict[str, object]:
 
 def test_dry_run_prints_the_plan_and_writes_nothing(tmp_path: Path, capsys) -> None:
     out = tmp_path / "rep"
-    assert main(["reproduce", "--suite", "pick_place", "--out", str(out), "--dry-run"]) == 0
+    argv = ["reproduce", "--suite", "pick_place", "--out", str(out), "--dry-run"]
+    assert main([*argv, "--recipe", "small-scratch"]) == 0
     text = capsys.readouterr().out
     for stage in (
         "collect train", "collect test", "train full-1", "evaluate full-1",
@@ -48,11 +49,19 @@ def test_dry_run_prints_the_plan_and_writes_nothing(tmp_path: Path, capsys) -> N
     ):  # fmt: skip
         assert stage in text
     assert "760 episodes" in text and "estimated total for what is left" in text
+    # the default recipe (small) freezes its backbone: Full-1 alone, T-OSVI refused up front
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert "recipe small, columns full-1 ->" in text and "train tosvi" not in text
+    assert main([*argv, "--columns", "full-1,tosvi"]) == 2
+    assert "--recipe small-scratch" in capsys.readouterr().err
     assert not out.exists()
 
 
 def test_stage_commands_label_each_column_and_pass_the_options(tmp_path: Path) -> None:
-    stages = _plan(tmp_path, columns=("no-adm", "no-waypoints"), workers=3, steps=40)
+    stages = _plan(
+        tmp_path, columns=("no-adm", "no-waypoints"), workers=3, steps=40, recipe="small-scratch"
+    )
     train = stages["train no-adm"].argv  # type: ignore[attr-defined]
     assert train[:3] == ["train", "--method", "awda"] and "--ablation" in train
     assert train[train.index("--ablation") + 1] == "no-adm"
@@ -236,14 +245,19 @@ def test_a_resumed_plan_estimates_only_what_is_left(tmp_path: Path) -> None:
     from awda_bench.data.trajectory_file import shard_dir
     from awda_bench.reproduce import COSTS
 
-    fresh = _plan(tmp_path, columns=("full-1",), steps=100)
+    frozen = _plan(tmp_path, columns=("full-1",), steps=100)  # small: + encoding the cache once
+    encode = COSTS.encode_frame_s * (280 * 11 + 200 * 10)
+    assert frozen["train full-1"].estimate_s == pytest.approx(100 * COSTS.frozen_step_s + encode)  # type: ignore[attr-defined]
+    fresh = _plan(tmp_path, columns=("full-1",), steps=100, recipe="small-scratch")
     assert fresh["train full-1"].estimate_s == pytest.approx(100 * COSTS.train_step_s["awda"])  # type: ignore[attr-defined]
     # 40 of 100 steps trained: train resumes from the last snapshot
     ckpt = tmp_path / "checkpoints" / "full-1"
     ckpt.mkdir(parents=True)
     (ckpt / "snapshot-000000040.pt").write_bytes(b"")
-    resumed = _plan(tmp_path, columns=("full-1",), steps=100)
+    resumed = _plan(tmp_path, columns=("full-1",), steps=100, recipe="small-scratch")
     assert resumed["train full-1"].estimate_s == pytest.approx(60 * COSTS.train_step_s["awda"])  # type: ignore[attr-defined]
+    resumed = _plan(tmp_path, columns=("full-1",), steps=100)  # the cache is encoded by then
+    assert resumed["train full-1"].estimate_s == pytest.approx(60 * COSTS.frozen_step_s)  # type: ignore[attr-defined]
     assert resumed["train full-1"].detail.endswith("100 steps, resumes at 40")  # type: ignore[attr-defined]
     # 3 kept shards (and a killed run's temporary file) in one unit of the train collection
     data = tmp_path / "data" / "train"
