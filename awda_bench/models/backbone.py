@@ -118,14 +118,6 @@ def build_resnet18_features(
     )
 
 
-def feature_map_size(height_px: int, width_px: int) -> tuple[int, int]:
-    """Spatial size of the backbone's output for an input of ``height_px x width_px``."""
-    h, w = height_px, width_px
-    for _ in range(5):  # conv1 (s2), maxpool (s2), layer2..4 (s2 each): kernel/padding keep ceil
-        h, w = (h + 1) // 2, (w + 1) // 2
-    return h, w
-
-
 class ImageNormalizer(nn.Module):
     """RGB in [0, 1] -> ImageNet-standardized input, as a module so it moves with the model."""
 

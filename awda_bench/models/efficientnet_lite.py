@@ -7,7 +7,7 @@ TensorFlow Lite release), whose keys follow lukemelas' ``EfficientNet-PyTorch`` 
 (``_conv_stem``, ``_blocks.N._depthwise_conv`` ...): :func:`lukemelas_to_timm` renames them. We
 chose timm over the package's own model class (``efficientnet-lite-pytorch``) because timm pads
 dynamically ("same" for any input size), while that class computes its padding once for 224x224;
-``tests/test_efficientnet_lite.py`` checks that both give the same ImageNet logits at 224x224.
+``tests/test_frozen_trunk.py`` checks that both give the same ImageNet logits at 224x224.
 Nothing is downloaded at run time.
 
 Stages (``stride``): the feature map after the last block of that stride, channels-first::

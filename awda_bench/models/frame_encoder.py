@@ -37,6 +37,8 @@ def build_frame_encoder(
 
 
 def feature_map_size(config: TrunkConfig, height_px: int, width_px: int) -> tuple[int, int]:
-    """Spatial size of the encoder's output for an input of ``height_px x width_px``."""
+    """Spatial size of the encoder's output for an input of ``height_px x width_px``: ceil(H / s),
+    ceil(W / s) for both backbones (ResNet-18's five stride-2 stages each keep the ceiling, and
+    nested ceilings of halves are the ceiling of the whole division)."""
     s = config.backbone_stride
     return -(-height_px // s), -(-width_px // s)
