@@ -249,7 +249,7 @@ def test_frozen_recipe_trains_from_the_cache_and_resumes_the_identical_curve(
 
 
 def test_ray_votes_pass_through_the_point_their_cell_images() -> None:
-    from awda_bench.models.demo_to_scene import cell_rays
+    from awda_bench.models.cell_readout import cell_rays
 
     # the pick-place camera (collected data: intrinsic_cv, extrinsic_cv at 240x320)
     k = torch.tensor(
@@ -308,3 +308,32 @@ def test_a_ray_voting_snapshot_refuses_another_camera() -> None:
     with pytest.raises(UsageError, match="camera"):
         check_camera(config, env_with(moved))
     check_camera(AwdaConfig(trunk=LITE0), env_with(moved))  # free votes: no camera to check
+
+
+def test_the_demo_pointer_points_by_content_not_by_place() -> None:
+    """Moving everything the demo and o_1 show by a few cells moves every waypoint's score over
+    o_1's cells by the same cells: the head has no absolute position to memorize scenes by
+    (``demo-to-scene``, which has, does not pass this)."""
+    from awda_bench.models.demo_pointer import DemoPointer
+
+    torch.manual_seed(0)
+    grid, dy, dx = (12, 16), 2, 3
+    head = DemoPointer(
+        channels=8, grid=grid, demo_frames=4, dim=16, queries=2, dropout=0.0, hidden=32,
+        waypoints=5, waypoint_dim=4, num_heads=2,
+    ).eval()  # fmt: skip
+    demo = torch.zeros(1, 4, 8, *grid)
+    first = torch.zeros(1, 8, *grid)
+    # content in the middle, empty cells around it
+    demo[..., 3:7, 4:9] = torch.randn(1, 4, 8, 4, 5)
+    first[..., 3:7, 4:9] = torch.randn(1, 8, 4, 5)
+
+    def scores(demo: torch.Tensor, first: torch.Tensor) -> torch.Tensor:
+        with torch.no_grad():
+            return head.readout.where_logits[1](head.tokens(demo, first)).view(*grid, 5)
+
+    p = scores(demo, first)
+    q = scores(*(torch.roll(x, (dy, dx), dims=(-2, -1)) for x in (demo, first)))
+    # the same scores, moved; compared off the image's edge cells (the 3x3 context pads there)
+    torch.testing.assert_close(q[1 + dy : -1, 1 + dx : -1], p[1 : -1 - dy, 1 : -1 - dx])
+    assert float(p.std()) > 0.05  # scores that differ between cells

@@ -27,6 +27,7 @@ from torch import nn
 
 from awda_bench.errors import UsageError
 from awda_bench.models.config import AwdaConfig
+from awda_bench.models.demo_pointer import DemoPointer
 from awda_bench.models.demo_to_scene import DemoToScene
 from awda_bench.models.frame_encoder import feature_map_size
 from awda_bench.models.trunk import VisualTrunk
@@ -59,7 +60,22 @@ class AwdaNet(nn.Module):
         self.config = config
         self.trunk = VisualTrunk(config.trunk, load_backbone_weights)
         trunk = config.trunk
-        self.scene_head: DemoToScene | None = None
+        self.scene_head: DemoToScene | DemoPointer | None = None
+        if trunk.head == "demo-pointer":
+            self.scene_head = DemoPointer(
+                channels=self.trunk.channels,
+                grid=feature_map_size(trunk, trunk.image_height_px, trunk.image_width_px),
+                demo_frames=trunk.demo_frames,
+                dim=trunk.attention_heads * trunk.attention_head_dim,
+                queries=trunk.attention_heads,
+                dropout=trunk.dropout,
+                hidden=config.head_hidden_dim,
+                waypoints=config.total_waypoints,
+                waypoint_dim=config.waypoint_dim,
+                num_heads=config.num_heads,
+                camera=_camera(config),
+            )
+            return
         if trunk.head == "demo-to-scene":
             self.scene_head = DemoToScene(
                 channels=self.trunk.channels,

@@ -24,10 +24,15 @@ BACKBONE_STRIDES: dict[str, tuple[int, ...]] = {
 }
 """Backbones and the stages (output strides) each can feed the attention layers from."""
 
-HEAD_CHOICES: tuple[str, ...] = ("self-attention", "demo-to-scene")
+HEAD_CHOICES: tuple[str, ...] = ("self-attention", "demo-to-scene", "demo-pointer")
 """``self-attention``: the reference's space-time self-attention over every frame's cells, then a
 spatial softmax on o_1; ``demo-to-scene``: o_1's cells attend to the demo's cells, then a spatial
-softmax on o_1 (:mod:`awda_bench.models.demo_to_scene`)."""
+softmax on o_1 (:mod:`awda_bench.models.demo_to_scene`); ``demo-pointer``: a spatial softmax on o_1
+of scores computed cell by cell from content (:mod:`awda_bench.models.demo_pointer`)."""
+
+CELL_HEADS: tuple[str, ...] = ("demo-to-scene", "demo-pointer")
+"""Heads that take the backbone's feature maps and end in a choice of o_1's cells
+(:mod:`awda_bench.models.cell_readout`; camera rays when the config has a camera)."""
 
 DEVICE_CHOICES: tuple[str, ...] = ("auto", "cpu", "cuda")
 """``auto`` picks CUDA when ``torch.cuda.is_available()``, else the CPU."""
@@ -155,7 +160,7 @@ class AwdaConfig:
     showed it (:mod:`awda_bench.models.demo_to_scene`)."""
     camera_intrinsic: tuple[float, ...] = ()
     """The agent camera's 3x3 ``intrinsic_cv``, row-major (9 numbers), or empty. With a camera the
-    ``demo-to-scene`` head votes points on the rays through o_1's cells (the reference mapped
+    cell heads (``demo-to-scene``, ``demo-pointer``) vote points on the rays through o_1's cells (the reference mapped
     image-plane predictions to the world through its camera matrix); without one its votes are
     free xyz."""
     camera_extrinsic: tuple[float, ...] = ()

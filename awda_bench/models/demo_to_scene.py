@@ -13,14 +13,8 @@ sample (``d`` = ``attention_head_dim * attention_heads``)::
                                   [+ 1x1 conv of the same cell in the demo's FIRST frame]--> Td*h'*w' tokens
     o_1 features  (C, h, w)     --1x1 conv, + position (h, w)-----------------------> h*w tokens
     attention_layers x [o_1 self-attention; o_1 -> demo cross-attention; MLP]  (pre-norm, residual)
-    per head, per waypoint j of the 15:
-        p_j = softmax over o_1's cells of  w_j . token            (where waypoint j is)
-        v_j(cell) = the cell's vote, an attributed point (3 + k), from MLP_j([token, cell x, y]):
-            with a camera:    the point at height z_j + dz(cell) on the camera ray through the
-                              cell's centre, moved by (dx, dy); |dz|, |dx|, |dy| <= 5 cm; z_j is a
-                              parameter per waypoint, the MLP gives dz, dx, dy and attributes
-            without:          the MLP gives xyz and attributes
-        waypoint_j = sum over cells of p_j(cell) v_j(cell)
+    waypoints read off o_1's tokens: a softmax over the cells per waypoint, each cell voting an
+    attributed point on its camera ray (:mod:`awda_bench.models.cell_readout`)
 
 With ``demo_reference`` each demo token holds its cell now and as the demo's first frame showed it: an o_1 cell that
 looks like what stood at a demo cell at the start can see, in one attention step, whether that
@@ -28,11 +22,11 @@ cell changed (the demonstrated object was taken from there) or not (a distractor
 
 A waypoint is therefore a soft choice of o_1 cells, each voting an attributed point: a grasp
 waypoint can land on the cell holding the object the demonstration picked up, whatever task
-that is, and a place waypoint reads where to go from the demo through its tokens. The rays are
-what makes the choice learnable: from the first step, moving p_j towards the cells that image a
-point moves the waypoint towards that point (free xyz votes start equal, and the loss then only
-sees their mean). The reference also went through its camera: it predicted image-plane
-coordinates and mapped them to the world with the camera matrix.
+that is, and a place waypoint reads where to go from the demo through its tokens.
+
+Measured (``reports/learned/recipe-study.md``): with learned absolute positions in every token
+this head memorizes its training scenes (it finds the soda can in them, and in new scenes at
+chance); :mod:`awda_bench.models.demo_pointer` is the head that generalizes.
 """
 
 from __future__ import annotations
@@ -40,33 +34,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-MAX_OFFSET_M = 0.05
-"""Largest horizontal offset [m] a ray vote may take from its ray, and its height from its
-waypoint's."""
-
-INITIAL_HEIGHT_M = 0.1
-"""Every waypoint's height [m, world z] before training (a TCP height above a tabletop)."""
-
-
-def cell_rays(
-    intrinsic: torch.Tensor,
-    extrinsic: torch.Tensor,
-    camera_size: tuple[int, int],
-    grid: tuple[int, int],
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """World-frame camera centre ``(3,)`` and unit ray directions ``(h*w, 3)`` through the centres
-    of a ``grid`` of cells over the image (OpenCV conventions: ``x_cam = R x_world + t``)."""
-    (hc, wc), (h, w) = camera_size, grid
-    v, u = torch.meshgrid(
-        (torch.arange(h, dtype=torch.float64) + 0.5) * hc / h,
-        (torch.arange(w, dtype=torch.float64) + 0.5) * wc / w,
-        indexing="ij",
-    )
-    pixels = torch.stack((u, v, torch.ones_like(u)), dim=-1).reshape(-1, 3)
-    rotation, translation = extrinsic[:, :3], extrinsic[:, 3]
-    directions = pixels @ torch.linalg.inv(intrinsic).T @ rotation  # R^T K^-1 [u v 1]
-    directions = directions / directions.norm(dim=-1, keepdim=True)
-    return -rotation.T @ translation, directions
+from awda_bench.models.cell_readout import Camera, CellReadout
 
 
 class _Layer(nn.Module):
@@ -108,14 +76,13 @@ class DemoToScene(nn.Module):
         waypoints: int,
         waypoint_dim: int,
         num_heads: int,
-        camera: tuple[torch.Tensor, torch.Tensor, tuple[int, int]] | None = None,
+        camera: Camera | None = None,
         demo_reference: bool = False,
     ) -> None:
         """``camera``: ``(intrinsic 3x3, extrinsic 3x4, (height, width))`` of the agent camera, for
         ray votes (module docstring)."""
         super().__init__()
         h, w = grid
-        self.waypoints, self.waypoint_dim, self.num_heads = waypoints, waypoint_dim, num_heads
         self.project = nn.Conv2d(channels, dim, kernel_size=1)
         self.demo_reference = demo_reference
         if demo_reference:
@@ -125,41 +92,7 @@ class DemoToScene(nn.Module):
         self.demo_pool = nn.AvgPool2d(2, ceil_mode=True)
         self.layers = nn.ModuleList(_Layer(dim, heads, dropout) for _ in range(layers))
         self.norm = nn.LayerNorm(dim)
-        ys, xs = torch.meshgrid(
-            torch.linspace(-1.0, 1.0, h), torch.linspace(-1.0, 1.0, w), indexing="ij"
-        )
-        self.register_buffer("cell_xy", torch.stack((xs, ys), dim=-1).reshape(h * w, 2))
-        self.rays = camera is not None
-        if camera is not None:
-            origin, directions = cell_rays(camera[0].double(), camera[1].double(), camera[2], grid)
-            self.register_buffer("ray_origin", origin.float())
-            self.register_buffer("ray_direction", directions.float())
-            self.height = nn.Parameter(torch.full((num_heads, waypoints), INITIAL_HEIGHT_M))
-        self.where = nn.ModuleList(nn.Linear(dim, waypoints) for _ in range(num_heads))
-        self.vote = nn.ModuleList(
-            nn.Sequential(
-                nn.Linear(dim + 2, hidden), nn.ReLU(), nn.Linear(hidden, waypoints * waypoint_dim)
-            )
-            for _ in range(num_heads)
-        )
-
-    cell_xy: torch.Tensor
-    ray_origin: torch.Tensor
-    ray_direction: torch.Tensor
-
-    def _ray_points(self, votes: torch.Tensor, head: int) -> torch.Tensor:
-        """Raw votes ``(..., L, N, 3 + k)`` read as (z, dx, dy, attributes) -> attributed points:
-        a waypoint's height is its own parameter plus at most ``MAX_OFFSET_M`` from the cell, so
-        that votes start ordered along the image (a free height per cell would scatter them)."""
-        height = self.height[head].view(-1, 1)  # (N, 1)
-        z = height + MAX_OFFSET_M * torch.tanh(votes[..., :1])
-        offset, attributes = votes[..., 1:3], votes[..., 3:]
-        direction = self.ray_direction[:, None, :]  # (L, 1, 3)
-        reach = (z - self.ray_origin[2]) / direction[..., 2:3]  # distance along the ray
-        point = self.ray_origin + reach * direction
-        shift = MAX_OFFSET_M * torch.tanh(offset)
-        point = torch.cat((point[..., :2] + shift, point[..., 2:]), dim=-1)
-        return torch.cat((point, attributes), dim=-1)
+        self.readout = CellReadout(dim, grid, hidden, waypoints, waypoint_dim, num_heads, camera)
 
     def tokens(self, demo: torch.Tensor, first: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Demo tokens ``(B, Td*h'*w', d)`` and o_1 tokens ``(B, h*w, d)``."""
@@ -180,17 +113,4 @@ class DemoToScene(nn.Module):
         demo_tokens, x = self.tokens(demo, first)
         for layer in self.layers:
             x = layer(x, demo_tokens)
-        x = self.norm(x)  # (B, L, d)
-        b, cells = x.shape[:2]
-        values_in = torch.cat((x, self.cell_xy.expand(b, -1, -1)), dim=-1)
-        out = x.new_empty(b, self.waypoints, self.waypoint_dim)
-        for i in range(self.num_heads):
-            rows = head == i
-            if not bool(rows.any()):
-                continue
-            where = torch.softmax(self.where[i](x[rows]), dim=1)  # (b_i, L, N)
-            votes = self.vote[i](values_in[rows]).view(-1, cells, self.waypoints, self.waypoint_dim)
-            if self.rays:
-                votes = self._ray_points(votes, i)
-            out[rows] = torch.einsum("bln,blnk->bnk", where, votes)
-        return out
+        return self.readout(self.norm(x), head)

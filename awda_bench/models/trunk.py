@@ -11,9 +11,9 @@ Data flow for one sample of ``T`` frames (AWDA: 10 demo frames + o_1, so T = 11)
       -> spatial softmax -> (T, 1024) keypoints
       -> 2-layer MLP (hidden 256) per frame -> (T, feature_dim)
 
-The caller picks the time step it needs (AWDA: the last one, o_1's). With ``head =
-"demo-to-scene"`` the trunk stops at the backbone and AWDA's head takes the feature maps
-(:mod:`awda_bench.models.demo_to_scene`).
+The caller picks the time step it needs (AWDA: the last one, o_1's). With a cell head
+(``demo-to-scene``, ``demo-pointer``) the trunk stops at the backbone and AWDA's head takes the
+feature maps (:mod:`awda_bench.models.demo_to_scene`, :mod:`awda_bench.models.demo_pointer`).
 """
 
 from __future__ import annotations
@@ -80,7 +80,7 @@ class VisualTrunk(nn.Module):
 
     def temporal(self, features: torch.Tensor) -> torch.Tensor:
         """``(B, T, C, h, w)`` -> per-frame vectors ``(B, T, feature_dim)`` (``self-attention``
-        head only; ``demo-to-scene`` reads the feature maps itself)."""
+        head only; the cell heads read the feature maps themselves)."""
         volume = features.permute(0, 2, 1, 3, 4)  # (B, C, T, h, w)
         volume = self.attention(self.positional(volume))
         return self.mlp(self.spatial_softmax(volume))

@@ -61,8 +61,8 @@ def _resize(frames: np.ndarray, height: int, width: int) -> np.ndarray:
 
 
 def check_camera(config: AwdaConfig, env: Any) -> None:
-    """A network whose waypoints are votes on its training camera's rays (``demo-to-scene`` with
-    a camera) refuses a scene whose third-person camera is another one."""
+    """A network whose waypoints are votes on its training camera's rays (a cell head with a
+    camera) refuses a scene whose third-person camera is another one."""
     if not config.camera_intrinsic:
         return
     from awda_bench.robot.cameras import camera_params

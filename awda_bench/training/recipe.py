@@ -80,8 +80,9 @@ class ModelRecipe:
     offline; efficientnet-lite0: the installed package), or a path to a local ResNet-18
     ``state_dict``."""
     head: str = "self-attention"
-    """``self-attention`` (the reference) or ``demo-to-scene``
-    (:mod:`awda_bench.models.demo_to_scene`)."""
+    """``self-attention`` (the reference), ``demo-to-scene``
+    (:mod:`awda_bench.models.demo_to_scene`) or ``demo-pointer``
+    (:mod:`awda_bench.models.demo_pointer`)."""
     demo_reference_frame: bool = False
     """``demo-to-scene`` only: demo tokens also hold their cell in the demo's first frame."""
     points_per_segment: int = 12

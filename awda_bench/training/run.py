@@ -36,7 +36,13 @@ from awda_bench.data.datasets import AwdaPairDataset, CollectedData, Selection, 
 from awda_bench.errors import ProtocolMismatchError, UnknownChoiceError, UsageError
 from awda_bench.models.architectures import build_model
 from awda_bench.models.awda_net import AwdaNet
-from awda_bench.models.config import AwdaConfig, TosviConfig, TrainConfig, TrunkConfig
+from awda_bench.models.config import (
+    CELL_HEADS,
+    AwdaConfig,
+    TosviConfig,
+    TrainConfig,
+    TrunkConfig,
+)
 from awda_bench.models.frame_encoder import build_frame_encoder
 from awda_bench.models.tosvi_net import TosviNet
 from awda_bench.models.train import SampleDataset, TrainResult, resolve_device, train
@@ -231,7 +237,7 @@ def model_config(
     recipe: Recipe, column: Column, camera: dict[str, Any] | None = None
 ) -> AwdaConfig | TosviConfig:
     """The network ``column`` trains under ``recipe``; ``camera`` (:func:`agent_camera`) is what
-    the ``demo-to-scene`` head votes along."""
+    the cell heads (``demo-to-scene``, ``demo-pointer``) vote along."""
     m = recipe.model
     trunk = TrunkConfig(
         image_height_px=m.image_height_px,
@@ -258,7 +264,7 @@ def model_config(
             points_per_segment=m.points_per_segment,
             gamma=m.gamma,
             attribute_scale=m.attribute_scale,
-            **(camera if camera is not None and m.head == "demo-to-scene" else {}),
+            **(camera if camera is not None and m.head in CELL_HEADS else {}),
         )
     return TosviConfig(
         trunk=replace(trunk, head="self-attention"),  # T-OSVI reads every frame's keypoints

@@ -1,0 +1,129 @@
+r"""Waypoints read off o_1's cells: for each of the N waypoints, a softmax over the cells of where
+it is, and each cell's vote for it, an attributed point; the waypoint is the weighted vote.
+
+Shared by the heads that end in a choice of o_1 cells (:mod:`awda_bench.models.demo_to_scene`,
+:mod:`awda_bench.models.demo_pointer`). One sample, tokens ``x`` ``(L, d)`` of o_1's ``L = h*w``
+cells, per waypoint head::
+
+    p_j = softmax over cells of  w_j . x(cell)                       (where waypoint j is)
+    v_j(cell) = MLP_j([x(cell), cell x, y])  read as an attributed point (3 + k):
+        with a camera:  the point at height z_j + dz(cell) on the camera ray through the cell's
+                        centre, moved by (dx, dy); |dz|, |dx|, |dy| <= 5 cm; z_j a parameter per
+                        waypoint, the MLP gives dz, dx, dy and attributes
+        without:        the MLP gives xyz and attributes
+    waypoint_j = sum over cells of p_j(cell) v_j(cell)
+
+The rays make the choice learnable: from the first step, moving p_j towards the cells that image a
+point moves the waypoint towards that point (free xyz votes start equal, and the loss then only
+sees their mean). The reference also went through its camera: it predicted image-plane
+coordinates and mapped them to the world with the camera matrix.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+MAX_OFFSET_M = 0.05
+"""Largest horizontal offset [m] a ray vote may take from its ray, and its height from its
+waypoint's."""
+
+INITIAL_HEIGHT_M = 0.1
+"""Every waypoint's height [m, world z] before training (a TCP height above a tabletop)."""
+
+Camera = tuple[torch.Tensor, torch.Tensor, tuple[int, int]]
+"""``(intrinsic 3x3, world-to-camera extrinsic 3x4, (height, width) [px])``, OpenCV conventions."""
+
+
+def cell_rays(
+    intrinsic: torch.Tensor,
+    extrinsic: torch.Tensor,
+    camera_size: tuple[int, int],
+    grid: tuple[int, int],
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """World-frame camera centre ``(3,)`` and unit ray directions ``(h*w, 3)`` through the centres
+    of a ``grid`` of cells over the image (OpenCV conventions: ``x_cam = R x_world + t``)."""
+    (hc, wc), (h, w) = camera_size, grid
+    v, u = torch.meshgrid(
+        (torch.arange(h, dtype=torch.float64) + 0.5) * hc / h,
+        (torch.arange(w, dtype=torch.float64) + 0.5) * wc / w,
+        indexing="ij",
+    )
+    pixels = torch.stack((u, v, torch.ones_like(u)), dim=-1).reshape(-1, 3)
+    rotation, translation = extrinsic[:, :3], extrinsic[:, 3]
+    directions = pixels @ torch.linalg.inv(intrinsic).T @ rotation  # R^T K^-1 [u v 1]
+    directions = directions / directions.norm(dim=-1, keepdim=True)
+    return -rotation.T @ translation, directions
+
+
+class CellReadout(nn.Module):
+    """``(tokens (B, h*w, d), head (B,))`` -> waypoints ``(B, N, 3 + k)`` (module docstring)."""
+
+    def __init__(
+        self,
+        dim: int,
+        grid: tuple[int, int],
+        hidden: int,
+        waypoints: int,
+        waypoint_dim: int,
+        num_heads: int,
+        camera: Camera | None = None,
+    ) -> None:
+        super().__init__()
+        h, w = grid
+        self.waypoints, self.waypoint_dim, self.num_heads = waypoints, waypoint_dim, num_heads
+        ys, xs = torch.meshgrid(
+            torch.linspace(-1.0, 1.0, h), torch.linspace(-1.0, 1.0, w), indexing="ij"
+        )
+        self.register_buffer("cell_xy", torch.stack((xs, ys), dim=-1).reshape(h * w, 2))
+        self.rays = camera is not None
+        if camera is not None:
+            origin, directions = cell_rays(camera[0].double(), camera[1].double(), camera[2], grid)
+            self.register_buffer("ray_origin", origin.float())
+            self.register_buffer("ray_direction", directions.float())
+            self.height = nn.Parameter(torch.full((num_heads, waypoints), INITIAL_HEIGHT_M))
+        self.where_logits = nn.ModuleList(nn.Linear(dim, waypoints) for _ in range(num_heads))
+        self.vote = nn.ModuleList(
+            nn.Sequential(
+                nn.Linear(dim + 2, hidden), nn.ReLU(), nn.Linear(hidden, waypoints * waypoint_dim)
+            )
+            for _ in range(num_heads)
+        )
+
+    cell_xy: torch.Tensor
+    ray_origin: torch.Tensor
+    ray_direction: torch.Tensor
+
+    def _ray_points(self, votes: torch.Tensor, head: int) -> torch.Tensor:
+        """Raw votes ``(..., L, N, 3 + k)`` read as (z, dx, dy, attributes) -> attributed points:
+        a waypoint's height is its own parameter plus at most ``MAX_OFFSET_M`` from the cell, so
+        that votes start ordered along the image (a free height per cell would scatter them)."""
+        height = self.height[head].view(-1, 1)  # (N, 1)
+        z = height + MAX_OFFSET_M * torch.tanh(votes[..., :1])
+        offset, attributes = votes[..., 1:3], votes[..., 3:]
+        direction = self.ray_direction[:, None, :]  # (L, 1, 3)
+        reach = (z - self.ray_origin[2]) / direction[..., 2:3]  # distance along the ray
+        point = self.ray_origin + reach * direction
+        shift = MAX_OFFSET_M * torch.tanh(offset)
+        point = torch.cat((point[..., :2] + shift, point[..., 2:]), dim=-1)
+        return torch.cat((point, attributes), dim=-1)
+
+    def where(self, x: torch.Tensor, head: int) -> torch.Tensor:
+        """``p_j``: tokens ``(B, L, d)`` of samples of waypoint head ``head`` -> ``(B, L, N)``, a
+        softmax over the cells per waypoint."""
+        return torch.softmax(self.where_logits[head](x), dim=1)
+
+    def forward(self, x: torch.Tensor, head: torch.Tensor) -> torch.Tensor:
+        b, cells = x.shape[:2]
+        values_in = torch.cat((x, self.cell_xy.expand(b, -1, -1)), dim=-1)
+        out = x.new_empty(b, self.waypoints, self.waypoint_dim)
+        for i in range(self.num_heads):
+            rows = head == i
+            if not bool(rows.any()):
+                continue
+            where = self.where(x[rows], i)  # (b_i, L, N)
+            votes = self.vote[i](values_in[rows]).view(-1, cells, self.waypoints, self.waypoint_dim)
+            if self.rays:
+                votes = self._ray_points(votes, i)
+            out[rows] = torch.einsum("bln,blnk->bnk", where, votes)
+        return out
