@@ -3,12 +3,13 @@ o_1 when told directly where it is? Waypoint 0 (the 1-waypoint set) is regressed
 grasp point (smooth L1, cm) instead of the Soft-DTW loss; batch 16, Adam 5e-4, frozen Lite0
 stride-16 features from the project's cache.
 
-usage: python scripts/screening/direct_grasp.py ref|noref|can STEPS TRAIN_DATA TEST_DATA
+usage: [HEAD=demo-pointer] python scripts/screening/direct_grasp.py ref|noref|can STEPS TRAIN_DATA TEST_DATA
 
 ``can``: localization alone, without identification: the horizontal position of the soda can
 (every scene has one) is the target, whatever the task.
 """
 
+import os
 import sys
 import time
 
@@ -36,7 +37,7 @@ T = TrunkConfig(
     backbone_stride=16,
     freeze_backbone=True,
     backbone_weights="imagenet",
-    head="demo-to-scene",
+    head=os.environ.get("HEAD", "demo-to-scene"),
     attention_head_dim=32,
 )
 OBJ = ["milk", "bread", "cereal", "can"]
