@@ -88,6 +88,7 @@ def batch(ds, pairs, info, idx):
 def evaluate(ds, pairs, info, n=300):
     model.eval()
     rng = np.random.default_rng(0)
+    n = min(n, len(ds))
     idx = rng.choice(len(ds), n, replace=False)
     errs, hit = [], []
     with torch.no_grad():
