@@ -337,3 +337,32 @@ def test_the_demo_pointer_points_by_content_not_by_place() -> None:
     # the same scores, moved; compared off the image's edge cells (the 3x3 context pads there)
     torch.testing.assert_close(q[1 + dy : -1, 1 + dx : -1], p[1 : -1 - dy, 1 : -1 - dx])
     assert float(p.std()) > 0.05  # scores that differ between cells
+
+
+def test_the_demo_pointer_identifies_the_object_before_it_is_placed() -> None:
+    """What the demonstrator moved is read from the demo's first half only: where it put the object
+    (the second half) cannot select which object to grasp (held-out tasks pair an object with a
+    compartment training never pairs it with)."""
+    from awda_bench.models.demo_pointer import DemoPointer
+
+    torch.manual_seed(0)
+    head = DemoPointer(
+        channels=8, grid=(6, 8), demo_frames=10, dim=16, queries=2, dropout=0.0, hidden=32,
+        waypoints=5, waypoint_dim=4, num_heads=2,
+    ).eval()  # fmt: skip
+    demo, first = torch.randn(1, 10, 8, 6, 8), torch.randn(1, 8, 6, 8)
+    placed_elsewhere = demo.clone()
+    placed_elsewhere[:, 5:] = torch.randn(1, 5, 8, 6, 8)
+    taken_elsewhere = demo.clone()
+    taken_elsewhere[:, 1:5] = torch.randn(1, 4, 8, 6, 8)
+
+    def what_moved(demo: torch.Tensor) -> torch.Tensor:
+        b, t, c, h, w = demo.shape
+        with torch.no_grad():
+            cells = head.embed(demo.reshape(b * t, c, h, w)).view(b, t, -1, h * w)
+            return head.what_moved(cells.permute(0, 3, 1, 2))
+
+    torch.testing.assert_close(what_moved(placed_elsewhere), what_moved(demo))
+    assert not torch.allclose(what_moved(taken_elsewhere), what_moved(demo))
+    with torch.no_grad():  # the place waypoints do see the second half
+        assert not torch.allclose(head.tokens(placed_elsewhere, first), head.tokens(demo, first))
