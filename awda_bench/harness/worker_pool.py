@@ -29,11 +29,11 @@ from multiprocessing.connection import Connection, wait
 from pathlib import Path
 from typing import Any
 
+from awda_bench.episode import EpisodeSpec, Policy
 from awda_bench.errors import AwdaError
 from awda_bench.harness.episode_record import STATUS_ERROR, EpisodeRecord
 from awda_bench.harness.episode_runner import FrameHook, run_episode
 from awda_bench.harness.methods import MethodSpec, SnapshotRef, make_policy, resolve
-from awda_bench.policies.base import EpisodeSpec, Policy
 from awda_bench.suites import Suite, load_suite
 
 DEFAULT_ENV_FACTORY = "awda_bench.harness.env_factory:make_env"
