@@ -81,7 +81,7 @@ def test_stages_have_the_documented_shapes_and_bad_stages_are_refused() -> None:
 def test_a_frozen_backbone_gets_no_gradient_and_no_optimizer_state(tmp_path: Path) -> None:
     from awda_bench.models.awda_net import AwdaNet
     from awda_bench.models.config import TrainConfig
-    from awda_bench.models.train import train
+    from awda_bench.training.loop import train
 
     torch.manual_seed(0)
     model = AwdaNet(AwdaConfig(trunk=LITE0))
