@@ -191,8 +191,8 @@ class ProcessPool(JobPool[J, R]):
         except (EOFError, OSError):
             slot.process.join(timeout=5)
             if slot.job is not None:
-                message = f"worker died (exit code {slot.process.exitcode}) during the episode"
-                self._give_up(slot, message, self._queue, on_result)
+                died = f"worker died (exit code {slot.process.exitcode}) during the episode"
+                self._give_up(slot, died, self._queue, on_result)
                 return self._respawn(slot)
             raise WorkerStartError(
                 f"a {self.worker_noun} exited (code {slot.process.exitcode}) before building its "
