@@ -20,9 +20,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from awda_bench.episode import EpisodeContext, EpisodeSpec
 from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.experts import EMBODIMENT_NAMES, make_expert
-from awda_bench.policies.base import EpisodeContext, EpisodeSpec
 from awda_bench.render_device import render_backend
 from awda_bench.suites import Suite, load_suite
 from awda_bench.trajectory import Trajectory

@@ -17,7 +17,10 @@ finished collections (their manifest is complete and describes the same request)
 runs (the last snapshot is at the recipe's step) and evaluated episodes (the store holds them for
 the same protocol fingerprint, label and snapshot hash). Before anything runs, the plan is printed
 with an estimated wall time per stage from the per-unit costs in :data:`COSTS` (measured on the
-2-core CPU machine this project is developed on; a GPU trains much faster).
+2-core CPU machine this project is developed on; a GPU trains much faster). What is left is read
+through the functions the commands themselves call, from the config each ``collect`` and ``run``
+stage's command line decides (:class:`~awda_bench.data.config.CollectConfig`,
+:class:`~awda_bench.harness.sweep.SweepConfig`; ``Stage.config``).
 """
 
 from __future__ import annotations
@@ -31,12 +34,14 @@ import sys
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from awda_bench.data.config import CollectConfig
 from awda_bench.errors import AwdaError, CorruptFileError, UnknownChoiceError, UsageError
+from awda_bench.harness.sweep import SweepConfig
 from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION
 from awda_bench.training.columns import COLUMNS, Column
 
@@ -136,6 +141,9 @@ class Stage:
     estimate_s: float
     done: bool
     detail: str = ""
+    config: CollectConfig | SweepConfig | None = None
+    """What a ``collect`` or ``run`` stage's command decides (its ``argv`` says the same); the
+    plan reads its progress from it."""
 
 
 def parse_columns(text: str) -> tuple[str, ...]:
@@ -175,23 +183,47 @@ def _train_target(recipe_name: str, steps: int | None) -> int:
     return steps if steps is not None else load_recipe(recipe_name).train.max_steps
 
 
-def _parse_stage_args(add_parser: Any, command: str, args: list[str]) -> Any:
-    """``args`` parsed by ``command``'s own parser, as the stage's subprocess will parse them."""
-    import argparse
-
-    parser = argparse.ArgumentParser()
-    add_parser(parser.add_subparsers())
-    return parser.parse_args([command, *args])
+def _quiet(progress: bool) -> list[str]:
+    return [] if progress else ["--no-progress"]
 
 
-def _collect_remaining(collect_args: list[str]) -> int:
+def _collect_argv(collect: CollectConfig) -> list[str]:
+    """The ``collect`` command line that decides ``collect`` (the fields a stage sets)."""
+    argv = [
+        "collect", "--suite", collect.suite, "--split", collect.split,
+        "--episodes-per-task", str(collect.episodes_per_task),
+    ]  # fmt: skip
+    if collect.split == "train":  # the training data names its synthesized share, 0 too
+        argv += ["--synthesize", str(collect.synthesize)]
+    return [
+        *argv, "--out", str(collect.out), "--workers", str(collect.workers),
+        *_quiet(collect.progress),
+    ]  # fmt: skip
+
+
+def _run_argv(sweep: SweepConfig) -> list[str]:
+    """The ``run`` command line that decides ``sweep`` (the fields a stage sets)."""
+    argv = [
+        "run", "--suite", sweep.suite, "--method", sweep.method,
+        "--checkpoints", str(sweep.checkpoints), "--snapshots", str(sweep.snapshots),
+        "--label", str(sweep.label),
+    ]  # fmt: skip
+    if sweep.split != "test":
+        argv += ["--split", sweep.split]
+    argv += [
+        "--out", str(sweep.out), "--workers", str(sweep.workers), *_quiet(sweep.progress),
+        *(a for t in sweep.tasks for a in ("--task", str(t))),
+    ]  # fmt: skip
+    if sweep.episodes is not None:
+        argv += ["--episodes", str(sweep.episodes)]
+    return argv
+
+
+def _collect_remaining(collect: CollectConfig) -> int:
     """Episodes ``collect`` would still record (all of them when nothing is there yet)."""
-    from awda_bench.commands.collect import add_parser, config_from_args
     from awda_bench.data.collect import collection_progress
 
-    already, planned = collection_progress(
-        config_from_args(_parse_stage_args(add_parser, "collect", collect_args))
-    )
+    already, planned = collection_progress(collect)
     return planned - already
 
 
@@ -204,23 +236,20 @@ def _steps_done(ckpt: Path) -> int:
     return int(match.group(1)) if match is not None else 0
 
 
-def _eval_remaining(run_args: list[str], checkpoints: Path | None) -> int | None:
+def _eval_remaining(sweep: SweepConfig) -> int | None:
     """Episodes ``run`` would still play (``None``: cannot tell yet, e.g. no snapshots)."""
-    from awda_bench.commands.run import add_parser, config_from_args
     from awda_bench.harness.results_store import STORE_NAME, ResultsStore
     from awda_bench.harness.sweep import prepare_sweep
 
-    if checkpoints is not None and not _has_snapshots(checkpoints):
+    if sweep.checkpoints is not None and not _has_snapshots(sweep.checkpoints):
         return None
-    args = _parse_stage_args(add_parser, "run", run_args)
     try:
-        plan = prepare_sweep(config_from_args(args))
+        plan = prepare_sweep(sweep)
     except UsageError:
         return None
-    out = Path(args.out)
-    if not (out / STORE_NAME).is_file():
+    if not (sweep.out / STORE_NAME).is_file():
         return len(plan.jobs)
-    with ResultsStore(out, create=False) as store:
+    with ResultsStore(sweep.out, create=False) as store:
         done = {
             snap.sha256: store.finished_keys(
                 plan.protocol.fingerprint, plan.method.name, snap.sha256
@@ -272,44 +301,45 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
     suite = load_suite(config.suite)
     out = config.out
     data, test = out / "data" / "train", out / "data" / "test"
-    workers = ["--workers", str(config.workers)]
-    quiet = [] if config.progress else ["--no-progress"]
+    quiet = _quiet(config.progress)
     stages: list[Stage] = []
     from awda_bench.data.plan import split_tasks
 
     n_train = len(split_tasks(suite, "train")) * config.episodes_per_task * 2 + config.synthesize
-    train_argv = [
-        "collect", "--suite", config.suite, "--split", "train",
-        "--episodes-per-task", str(config.episodes_per_task),
-        "--synthesize", str(config.synthesize), "--out", str(data), *workers, *quiet,
-    ]  # fmt: skip
-    left_train = _collect_remaining(train_argv[1:])
+    collect_train = CollectConfig(
+        suite=config.suite, split="train", embodiment="both",
+        episodes_per_task=config.episodes_per_task, synthesize=config.synthesize, out=data,
+        workers=config.workers, progress=config.progress,
+    )  # fmt: skip
+    left_train = _collect_remaining(collect_train)
     stages.append(
         Stage(
             "collect train",
-            train_argv,
+            _collect_argv(collect_train),
             left_train * COSTS.collect_episode_s * 2 / config.workers,
             _collection_done(data, "train", config.episodes_per_task, config.synthesize),
             f"{n_train} episodes" + (f", {left_train} left" if 0 < left_train < n_train else ""),
+            collect_train,
         )
     )  # fmt: skip
     val: list[str] = []
     if config.hold_out is None:
         n_test = len(suite.eval_tasks) * config.val_episodes_per_task * 2
-        test_argv = [
-            "collect", "--suite", config.suite, "--split", "test",
-            "--episodes-per-task", str(config.val_episodes_per_task),
-            "--out", str(test), *workers, *quiet,
-        ]  # fmt: skip
-        left_test = _collect_remaining(test_argv[1:])
+        collect_test = CollectConfig(
+            suite=config.suite, split="test", embodiment="both",
+            episodes_per_task=config.val_episodes_per_task, out=test, workers=config.workers,
+            progress=config.progress,
+        )  # fmt: skip
+        left_test = _collect_remaining(collect_test)
         stages.append(
             Stage(
                 "collect test",
-                test_argv,
+                _collect_argv(collect_test),
                 left_test * COSTS.collect_episode_s * 2 / config.workers,
                 _collection_done(test, "test", config.val_episodes_per_task, 0),
                 f"{n_test} validation episodes"
                 + (f", {left_test} left" if 0 < left_test < n_test else ""),
+                collect_test,
             )
         )  # fmt: skip
         val = ["--val-data", str(test)]
@@ -361,52 +391,46 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
                 + (f", resumes at {steps_done}" if 0 < steps_done < target else ""),
             )
         )  # fmt: skip
-        method = EVAL_METHOD[column.arch]
-        run_argv = [
-            "--suite", config.suite, "--method", method, "--checkpoints", str(ckpt),
-            "--snapshots", str(config.snapshots), "--label", key, "--out", str(runs),
-            *workers, *quiet, *(a for t in tasks for a in ("--task", str(t))),
-        ]  # fmt: skip
-        if config.episodes is not None:
-            run_argv += ["--episodes", str(config.episodes)]
+        evaluate = SweepConfig(
+            suite=config.suite, method=EVAL_METHOD[column.arch], out=runs, checkpoints=ckpt,
+            snapshots=config.snapshots, episodes=config.episodes, workers=config.workers,
+            tasks=tuple(tasks), progress=config.progress, label=key,
+        )  # fmt: skip
         n_eval = config.snapshots * episodes * units
         trained = steps_done >= target
         # until training is done the snapshots to evaluate are not all there: plan all of them
-        remaining = _eval_remaining(run_argv, ckpt) if trained else None
+        remaining = _eval_remaining(evaluate) if trained else None
         stages.append(
             Stage(
                 f"evaluate {key}",
-                ["run", *run_argv],
+                _run_argv(evaluate),
                 (n_eval if remaining is None else remaining)
                 * COSTS.eval_episode_s[column.arch]
                 / config.workers,
                 remaining == 0,
                 f"{config.snapshots} snapshots x {episodes} episodes x {units} "
                 f"{'family' if suite.episode_unit == 'family' else 'tasks'}",
+                evaluate,
             )
         )
         if key == FIT_CHECK_COLUMN and config.fit_check and config.hold_out is None:
-            train_tasks = [str(t.index) for t in suite.train_tasks[:FIT_CHECK_TASKS]]
-            fit_argv = [
-                "--suite", config.suite, "--method", method, "--checkpoints", str(ckpt),
-                "--snapshots", str(FIT_CHECK_SNAPSHOTS), "--label", FIT_CHECK_LABEL,
-                "--split", "train", "--out", str(out / "runs-train-tasks"), *workers,
-                *quiet,
-                *(a for t in train_tasks for a in ("--task", t)),
-            ]  # fmt: skip
-            if config.episodes is not None:
-                fit_argv += ["--episodes", str(config.episodes)]
-            remaining = _eval_remaining(fit_argv, ckpt) if trained else None
+            train_tasks = tuple(t.index for t in suite.train_tasks[:FIT_CHECK_TASKS])
+            fit = replace(
+                evaluate, out=out / "runs-train-tasks", snapshots=FIT_CHECK_SNAPSHOTS,
+                tasks=train_tasks, label=FIT_CHECK_LABEL, split="train",
+            )  # fmt: skip
+            remaining = _eval_remaining(fit) if trained else None
             n_fit = FIT_CHECK_SNAPSHOTS * episodes * FIT_CHECK_TASKS
             stages.append(
                 Stage(
                     f"evaluate {key} on training tasks",
-                    ["run", *fit_argv],
+                    _run_argv(fit),
                     (n_fit if remaining is None else remaining)
                     * COSTS.eval_episode_s[column.arch]
                     / config.workers,
                     remaining == 0,
-                    f"tasks {', '.join(train_tasks)}: did it fit?",
+                    f"tasks {', '.join(map(str, train_tasks))}: did it fit?",
+                    fit,
                 )
             )
     stages.append(

@@ -18,8 +18,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from awda_bench.episode import EpisodeContext
 from awda_bench.errors import CorruptFileError
-from awda_bench.policies.base import EpisodeContext
 
 FAKE_SUITE_TOML = """
 name = "fake"

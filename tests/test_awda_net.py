@@ -15,6 +15,7 @@ from awda_bench.errors import UsageError
 from awda_bench.models.awda_net import HEAD_NAMES, AwdaNet
 from awda_bench.models.backbone import BackboneWeightsUnavailableError, build_resnet18_features
 from awda_bench.models.config import AwdaConfig, TrunkConfig
+from awda_bench.models.predict import predict_waypoints
 from awda_bench.models.synthetic import SyntheticWaypointDataset
 from awda_bench.models.waypoint_loss import interpolate_polyline, split_waypoint_sets
 
@@ -117,12 +118,12 @@ def test_predict_waypoints_returns_five_positions_and_probabilities() -> None:
     rng = np.random.default_rng(0)
     demo = rng.integers(0, 256, size=(2, 64, 64, 3), dtype=np.uint8)
     first = rng.integers(0, 256, size=(64, 64, 3), dtype=np.uint8)
-    out = model.predict_waypoints(demo, first)
+    out = predict_waypoints(model, demo, first)
     assert out.shape == (5, 4) and out.dtype == np.float64
     assert np.all((out[:, 3] >= 0) & (out[:, 3] <= 1))
     assert model.training  # restored after the eval-mode pass
     with pytest.raises(UsageError, match="render the camera"):
-        model.predict_waypoints(demo[:, :32], first[:32])
+        predict_waypoints(model, demo[:, :32], first[:32])
 
 
 @pytest.mark.slow
@@ -161,6 +162,6 @@ def test_overfits_a_tiny_batch_and_predicts_its_waypoints() -> None:
         assert torch.all((waypoint_set[:, -1, :3] - goals[:, :3]).norm(dim=-1) < 0.02)
     for i in range(2):  # inference (eval mode): BatchNorm running statistics of a 2-sample batch
         head = HEAD_NAMES[int(batch["head"][i])]  # sample i was trained through this head
-        predicted = model.predict_waypoints(batch["demo"][i], batch["first_frame"][i], head=head)
+        predicted = predict_waypoints(model, batch["demo"][i], batch["first_frame"][i], head=head)
         assert np.linalg.norm(predicted[-1, :3] - goals[i, :3].numpy()) < 0.05  # measured: 2-3.5 cm
         assert predicted[-1, 3] > 0.5  # the goal waypoint's grasp attribute

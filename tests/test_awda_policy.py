@@ -14,7 +14,7 @@ import pytest
 from awda_bench.models.architectures import build_model
 from awda_bench.models.config import AwdaConfig, TrainConfig, TrunkConfig
 from awda_bench.models.synthetic import SyntheticWaypointDataset
-from awda_bench.models.train import train
+from awda_bench.training.loop import train
 
 pytestmark = pytest.mark.slow
 

@@ -10,8 +10,8 @@ import torch
 
 from awda_bench.envs.basketball import BALLS, HOOPS, BallSpec, BasketballLayout
 from awda_bench.envs.static_props import HoopSpec, sample_separated_xy
+from awda_bench.episode import EpisodeContext, EpisodeSpec
 from awda_bench.experts.basketball import BasketballExpert, BasketballExpertConfig
-from awda_bench.policies.base import EpisodeContext, EpisodeSpec
 
 PANDA_OPEN_M = 0.08
 """Panda finger gap when open [m]."""

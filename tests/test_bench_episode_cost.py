@@ -4,8 +4,8 @@ import argparse
 
 import pytest
 
+from awda_bench.benchmarks.episode_cost import add_episode_cost_args, run_episode_cost_bench
 from awda_bench.errors import UsageError
-from awda_bench.harness.bench_episode_cost import add_episode_cost_args, run_episode_cost_bench
 
 
 def _args(*argv: str) -> argparse.Namespace:

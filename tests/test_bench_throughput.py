@@ -4,7 +4,7 @@ from pathlib import Path
 import pytest
 from harness_fakes import write_fake_suite
 
-from awda_bench.harness.bench_throughput import add_harness_args, run_harness_bench
+from awda_bench.benchmarks.throughput import add_harness_args, run_harness_bench
 
 
 @pytest.mark.slow
@@ -37,7 +37,7 @@ def test_harness_bench_reports_throughput_and_identical_outcomes(tmp_path: Path,
 
 
 def test_core_scaling_times_one_process_alone_and_n_together() -> None:
-    from awda_bench.harness.core_scaling import KERNELS, measure_core_scaling
+    from awda_bench.benchmarks.core_scaling import KERNELS, measure_core_scaling
 
     found = measure_core_scaling(2, units=1, rounds=1)
     assert [c.kernel for c in found] == list(KERNELS)

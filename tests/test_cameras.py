@@ -6,7 +6,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import awda_bench.robot  # noqa: F401
+import awda_bench.envs  # noqa: F401  (registers panda_awda, AWDA-EmptyTable-v1)
 from awda_bench.errors import UnknownChoiceError
 from awda_bench.robot.cameras import capture_rgb, capture_wrist_depth
 

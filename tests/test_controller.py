@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-import awda_bench.robot  # noqa: F401  (registers panda_awda, AWDA-EmptyTable-v1)
+import awda_bench.envs  # noqa: F401  (registers panda_awda, AWDA-EmptyTable-v1)
 from awda_bench.robot.ik import PandaIK
 
 pytestmark = pytest.mark.slow
@@ -140,7 +140,7 @@ def test_state_round_trip_restores_the_gripper_command(env) -> None:
 
 def test_the_action_means_what_it_says(env) -> None:
     """Issue 10's goals, measured as ``bench controller --fidelity`` measures them (fewer targets)."""
-    from awda_bench.robot.controller_fidelity import measure_fidelity
+    from awda_bench.benchmarks.controller_fidelity import measure_fidelity
 
     report = measure_fidelity(env, targets=4)
     gains = np.array(list(report.gains.values()))

@@ -10,8 +10,8 @@ import torch
 
 from awda_bench.envs.articulated import DoorCabinetSpec, hinge_joint_quat, rotate_z
 from awda_bench.envs.door import DoorLayout
+from awda_bench.episode import EpisodeContext, EpisodeSpec
 from awda_bench.experts.door import DoorExpert, DoorExpertConfig
-from awda_bench.policies.base import EpisodeContext, EpisodeSpec
 
 REST_HAND_HALF_LENGTH_M = 0.104
 """The Panda hand at the agent's rest pose spans |y| <= this around y = 0 [m]."""

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from awda_bench.episode import EpisodeContext, EpisodeSpec, Policy
 from awda_bench.errors import UnknownChoiceError
 from awda_bench.experts import PickPlaceExpertConfig, make_expert
-from awda_bench.policies.base import EpisodeContext, EpisodeSpec, Policy
 
 
 def test_make_expert_returns_a_policy_and_rejects_unknown_names() -> None:

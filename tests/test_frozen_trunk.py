@@ -81,7 +81,7 @@ def test_stages_have_the_documented_shapes_and_bad_stages_are_refused() -> None:
 def test_a_frozen_backbone_gets_no_gradient_and_no_optimizer_state(tmp_path: Path) -> None:
     from awda_bench.models.awda_net import AwdaNet
     from awda_bench.models.config import TrainConfig
-    from awda_bench.models.train import train
+    from awda_bench.training.loop import train
 
     torch.manual_seed(0)
     model = AwdaNet(AwdaConfig(trunk=LITE0))
@@ -237,13 +237,14 @@ def test_frozen_recipe_trains_from_the_cache_and_resumes_the_identical_curve(
     assert (
         model.config.trunk.backbone == "efficientnet-lite0" and model.config.trunk.freeze_backbone
     )
+    from awda_bench.models.predict import predict_waypoints
     from awda_bench.policies.awda_policy import AWDAPolicy
 
     policy = AWDAPolicy(list_snapshots(part)[-1])  # evaluation encodes live frames itself
     data = CollectedData(data_dir)
     agent, demo = data.select("agent")[0], data.select("demonstrator")[0]
     frames = data.frames(demo, np.linspace(0, demo.steps, 10).round().astype(int))
-    waypoints = policy.model.predict_waypoints(frames, data.frames(agent, [0])[0])
+    waypoints = predict_waypoints(policy.model, frames, data.frames(agent, [0])[0])
     assert waypoints.shape == (5, 4) and np.all(np.isfinite(waypoints))
     data.close()
 

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from awda_bench.policies.base import EpisodeContext, EpisodeSpec, Policy
+from awda_bench.episode import EpisodeContext, EpisodeSpec, Policy
 from awda_bench.policies.random_policy import RandomPolicy
 
 

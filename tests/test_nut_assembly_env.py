@@ -10,8 +10,8 @@ import torch
 
 from awda_bench.envs.nut_assembly import NUTS, PEGS, NutAssemblyLayout, NutSpec
 from awda_bench.envs.static_props import PegSpec
+from awda_bench.episode import EpisodeContext, EpisodeSpec
 from awda_bench.experts.nut_assembly import NutAssemblyExpert, NutAssemblyExpertConfig
-from awda_bench.policies.base import EpisodeContext, EpisodeSpec
 
 PANDA_OPEN_M = 0.08
 """Panda finger gap when open [m]."""

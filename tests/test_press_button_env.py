@@ -9,8 +9,8 @@ import pytest
 import torch
 
 from awda_bench.envs.press_button import PressButtonLayout
+from awda_bench.episode import EpisodeContext, EpisodeSpec
 from awda_bench.experts.press_button import PressButtonExpert, PressButtonExpertConfig
-from awda_bench.policies.base import EpisodeContext, EpisodeSpec
 
 # ---------------------------------------------------------------------------- fast
 

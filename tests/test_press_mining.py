@@ -87,8 +87,8 @@ def test_recorded_agent_press_matches_the_truth() -> None:
     import gymnasium as gym
 
     import awda_bench.envs  # noqa: F401
+    from awda_bench.episode import EpisodeContext, EpisodeSpec
     from awda_bench.experts.press_button import PressButtonExpert
-    from awda_bench.policies.base import EpisodeContext, EpisodeSpec
 
     env = gym.make("AWDA-PressButton-v1", obs_mode="state", reward_mode="none", num_envs=1)
     try:

@@ -21,9 +21,10 @@ from harness_fakes import write_fake_suite
 from awda_bench.cli import main
 from awda_bench.harness.episode_record import STATUS_ERROR, STATUS_OK, EpisodeRecord
 from awda_bench.harness.episode_specs import build_episode_specs, make_protocol
+from awda_bench.harness.job_pool import WorkerStartError
 from awda_bench.harness.methods import BUILTIN_SNAPSHOT, MethodSpec, SnapshotRef
 from awda_bench.harness.results_store import STORE_NAME
-from awda_bench.harness.worker_pool import Job, WorkerConfig, WorkerStartError
+from awda_bench.harness.worker_pool import Job, WorkerConfig
 from awda_bench.suites import load_suite
 
 if os.environ.get("CI"):

@@ -75,6 +75,36 @@ def test_stage_commands_label_each_column_and_pass_the_options(tmp_path: Path) -
     assert "evaluate full-1 on training tasks" not in stages
 
 
+def test_each_collect_and_run_stage_command_decides_the_config_its_progress_is_read_from(
+    tmp_path: Path,
+) -> None:
+    """The plan reads a stage's progress from its config (the layer below the commands); the
+    stage's command line, parsed by that command's own parser, decides the same config."""
+    import argparse
+    import dataclasses
+
+    from awda_bench.commands import collect, run
+
+    commands = {"collect": collect, "run": run}
+    for kw in ({}, {"columns": ("full-1", "tosvi"), "episodes": 4, "progress": False}):
+        stages = plan_stages(
+            ReproduceConfig(
+                suite="pick_place", out=tmp_path, workers=3, recipe="small-scratch", **kw
+            )
+        )
+        checked = [s for s in stages if s.config is not None]
+        assert {s.argv[0] for s in checked} == {"collect", "run"}
+        assert len(checked) == len([s for s in stages if s.argv[0] in commands])
+        for stage in checked:
+            command = commands[stage.argv[0]]
+            parser = argparse.ArgumentParser()
+            command.add_parser(parser.add_subparsers())
+            decided = command.config_from_args(parser.parse_args(stage.argv))
+            if stage.argv[0] == "run":  # the command line recorded in the store
+                decided = dataclasses.replace(decided, command=stage.config.command)
+            assert decided == stage.config, stage.name
+
+
 def test_finished_stages_are_recognized(tmp_path: Path) -> None:
     data = tmp_path / "data" / "train"
     data.mkdir(parents=True)

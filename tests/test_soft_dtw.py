@@ -166,7 +166,7 @@ def test_bench_soft_dtw_times_native_implementations_side_by_side(
 ) -> None:
     import argparse
 
-    from awda_bench.models.bench_soft_dtw import add_soft_dtw_args, run_soft_dtw_bench
+    from awda_bench.benchmarks.soft_dtw import add_soft_dtw_args, run_soft_dtw_bench
 
     parser = argparse.ArgumentParser()
     add_soft_dtw_args(parser)

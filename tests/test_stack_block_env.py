@@ -9,8 +9,8 @@ import pytest
 import torch
 
 from awda_bench.envs.stack_block import STACK_ORDERS, StackBlockLayout
+from awda_bench.episode import EpisodeContext, EpisodeSpec
 from awda_bench.experts.stack_block import StackBlockExpert, StackBlockExpertConfig
-from awda_bench.policies.base import EpisodeContext, EpisodeSpec
 
 # ---------------------------------------------------------------------------- fast
 

@@ -15,10 +15,10 @@ import numpy as np
 import pytest
 import torch
 
+from awda_bench.episode import EpisodeContext, EpisodeSpec
 from awda_bench.models.architectures import build_model
 from awda_bench.models.config import AwdaConfig, TosviConfig, TrunkConfig
 from awda_bench.models.snapshot import save_snapshot
-from awda_bench.policies.base import EpisodeContext, EpisodeSpec
 from awda_bench.robot.cameras import DepthFrame
 
 H, W = 64, 80

@@ -10,7 +10,7 @@ from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig, TrainConfig, TrunkConfig
 from awda_bench.models.snapshot import list_snapshots
 from awda_bench.models.synthetic import SyntheticWaypointDataset
-from awda_bench.models.train import batch_indices, resolve_device, train
+from awda_bench.training.loop import batch_indices, resolve_device, train
 
 torch.set_num_threads(1)
 

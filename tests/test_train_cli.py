@@ -182,6 +182,7 @@ def test_every_column_trains_20_steps_into_loadable_snapshots(
     assert (out / "learning_curve.png").stat().st_size > 0
     assert any((out / "tensorboard").iterdir())
     if column.arch == "awda":
+        from awda_bench.models.predict import predict_waypoints
         from awda_bench.policies.awda_policy import AWDAPolicy
 
         policy = AWDAPolicy(snapshots[-1])  # what the `awda` evaluation method loads
@@ -189,7 +190,7 @@ def test_every_column_trains_20_steps_into_loadable_snapshots(
         agent = data.select("agent")[0]
         demo = data.select("demonstrator")[0]
         frames = data.frames(demo, np.linspace(0, demo.steps, 10).round().astype(int))
-        waypoints = policy.model.predict_waypoints(frames, data.frames(agent, [0])[0])
+        waypoints = predict_waypoints(policy.model, frames, data.frames(agent, [0])[0])
         assert waypoints.shape == (5, 4) and np.all(np.isfinite(waypoints))
     else:
         from awda_bench.models.tosvi_net import TosviNet

@@ -1,7 +1,7 @@
 """``python -m awda_bench bench <what> [options]``: speed measurements printed side by side in one run.
 
-Each benchmark lives beside the code it measures; this module only wires them (and imports the
-chosen one alone, so the CLI starts fast):
+Each benchmark is a module of :mod:`awda_bench.benchmarks`; this module only wires them (and
+imports the chosen one alone, so the CLI starts fast):
 
     controller  mink IK vs ManiSkill pd_ee_delta_pos vs pd_joint_pos (env steps/s)
     env         task env steps/s with the scripted expert + cost of one rendered frame
@@ -23,38 +23,38 @@ from awda_bench.render_device import require_renderer
 BENCHMARKS: dict[str, tuple[str, str, str, bool]] = {
     # name: (module, add-args function, run function, needs the renderer)
     "controller": (
-        "awda_bench.robot.bench_controller",
+        "awda_bench.benchmarks.controller",
         "add_controller_args",
         "run_controller_bench",
         True,
     ),
-    "env": ("awda_bench.envs.bench_env", "add_env_args", "run_env_bench", True),
+    "env": ("awda_bench.benchmarks.env", "add_env_args", "run_env_bench", True),
     "primitives": (
-        "awda_bench.primitives.bench_primitives",
+        "awda_bench.benchmarks.primitives",
         "add_primitives_args",
         "run_primitives_bench",
         True,
     ),
     "harness": (
-        "awda_bench.harness.bench_throughput",
+        "awda_bench.benchmarks.throughput",
         "add_harness_args",
         "run_harness_bench",
         True,
     ),
     "episode-cost": (
-        "awda_bench.harness.bench_episode_cost",
+        "awda_bench.benchmarks.episode_cost",
         "add_episode_cost_args",
         "run_episode_cost_bench",
         True,
     ),
     "inference": (
-        "awda_bench.models.bench_inference",
+        "awda_bench.benchmarks.inference",
         "add_inference_args",
         "run_inference_bench",
         False,
     ),
     "soft-dtw": (
-        "awda_bench.models.bench_soft_dtw",
+        "awda_bench.benchmarks.soft_dtw",
         "add_soft_dtw_args",
         "run_soft_dtw_bench",
         False,

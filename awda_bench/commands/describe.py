@@ -14,9 +14,9 @@ import torch
 from torch import nn
 
 from awda_bench.models.awda_net import AwdaNet
-from awda_bench.models.bench_inference import _inputs
 from awda_bench.models.cli_options import add_model_args, model_from_args
 from awda_bench.models.config import config_to_dict
+from awda_bench.models.synthetic import random_forward_inputs
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -70,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
         return hook
 
     hooks = [module.register_forward_hook(recorder(name)) for name, module in stages.items()]
-    inputs = _inputs(model, 1, torch.device("cpu"))
+    inputs = random_forward_inputs(model, 1, torch.device("cpu"))
     with torch.inference_mode():
         output = model(*inputs)
     for hook in hooks:

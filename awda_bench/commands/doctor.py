@@ -82,7 +82,7 @@ def render_test_frame() -> tuple[np.ndarray, float]:
     """Render the third-person camera of the empty-table scene once: (H, W, 3) uint8, seconds."""
     import gymnasium as gym
 
-    import awda_bench.robot  # noqa: F401  (registers panda_awda and AWDA-EmptyTable-v1)
+    import awda_bench.envs  # noqa: F401  (registers panda_awda and AWDA-EmptyTable-v1)
     from awda_bench.render_device import render_backend
     from awda_bench.robot.cameras import capture_rgb
 

@@ -1,7 +1,9 @@
-"""Collection workers: processes that each build their envs once and record jobs as they come.
+"""Collection workers: processes that each build their recorder once and record jobs as they come.
 
-The same shape as the evaluation pool (:mod:`awda_bench.harness.worker_pool`): jobs in, records
-out, so another backend (Ray) can implement :class:`JobRunner` the same way::
+What a worker holds is a :class:`RecorderExecutor`; :class:`ProcessRunner` runs it on the local
+process pool the evaluation uses too (:mod:`awda_bench.harness.process_pool`): jobs in, results
+out, so another backend (Ray, :mod:`awda_bench.data.ray_runner`) implements :class:`JobRunner` the
+same way::
 
     parent                                  worker k (spawned; OMP_NUM_THREADS=1)
       start ------------------------------>   recorder = EpisodeRecorder(config)
@@ -13,25 +15,23 @@ out, so another backend (Ray) can implement :class:`JobRunner` the same way::
       ... watchdog: a job older than job_timeout_s -> kill worker, error result, respawn
       None ------------------------------->   close envs, exit
 
-A worker that cannot build its recorder stops the collection (:class:`WorkerStartError`).
+A worker that cannot build its recorder stops the collection
+(:class:`~awda_bench.harness.job_pool.WorkerStartError`).
 """
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
-import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from multiprocessing.connection import Connection, wait
-from typing import Any, Protocol
+from functools import partial
+from typing import Protocol
 
 from awda_bench.data.config import CollectConfig
 from awda_bench.data.plan import Attempt, CollectJob, make_attempt
 from awda_bench.data.recorder import EpisodeData, EpisodeRecorder
-from awda_bench.harness.worker_pool import WorkerStartError, _single_threaded_children
+from awda_bench.harness.process_pool import ProcessPool
 
 
 @dataclass
@@ -134,133 +134,41 @@ class InlineRunner:
             recorder.close()
 
 
-def _worker_main(conn: Connection, config: CollectConfig) -> None:
-    try:
-        recorder = EpisodeRecorder(config)
-        # build the first env now: a broken renderer stops the collection at start-up
-        recorder.env_for(recorder.suite.tasks[0].index, "agent")
-        recorder.close()  # jobs build their own envs
-    except BaseException as exc:
-        conn.send(("fatal", f"{type(exc).__name__}: {exc}"))
-        conn.close()
-        return
-    conn.send(("ready", os.getpid()))
-    try:
-        while True:
-            try:
-                job = conn.recv()
-            except EOFError:
-                break  # the parent is gone
-            if job is None:
-                break
-            result = play(recorder, job)
-            try:
-                conn.send(("result", result))
-            except BrokenPipeError:
-                break  # the parent was killed; the attempt is re-recorded on resume
-    finally:
-        recorder.close()
-        conn.close()
+class RecorderExecutor:
+    """What a collect worker (process or Ray actor) holds: a recorder. One env is built at
+    start-up (a broken renderer stops the collection before any job) and closed: each job builds
+    its own fresh env (:func:`play`)."""
+
+    def __init__(self, config: CollectConfig) -> None:
+        self.recorder = EpisodeRecorder(config)
+        self.recorder.env_for(self.recorder.suite.tasks[0].index, "agent")
+        self.recorder.close()
+
+    def play(self, job: CollectJob) -> JobResult:
+        return play(self.recorder, job)
+
+    def close(self) -> None:
+        self.recorder.close()
 
 
-class _Slot:
-    def __init__(self, ctx: Any, config: CollectConfig) -> None:
-        self.conn, child = ctx.Pipe(duplex=True)
-        self.process = ctx.Process(target=_worker_main, args=(child, config), daemon=True)
-        with _single_threaded_children():
-            self.process.start()
-        child.close()
-        self.ready = False
-        self.job: CollectJob | None = None
-        self.since = time.monotonic()
-
-    def kill(self) -> None:
-        if self.process.is_alive():
-            self.process.kill()
-        self.process.join(timeout=10)
-        self.conn.close()
+def lost_job_result(job: CollectJob, message: str, elapsed_s: float) -> JobResult:
+    """The result of a job a pool gave up on (hung, or its worker lost): the unit is left
+    unfinished and retried on re-run."""
+    return JobResult(job=job, error=message)
 
 
-class ProcessRunner:
+class ProcessRunner(ProcessPool[CollectJob, JobResult]):
     """Record jobs on ``workers`` spawned processes (the local backend of ``collect``)."""
 
+    worker_noun = "collect worker"
+    job_noun = "job"
+
     def __init__(self, config: CollectConfig, workers: int, start_timeout_s: float = 600.0) -> None:
-        if workers < 1:
-            raise ValueError("workers must be >= 1")
-        self.config = config
-        self.workers = workers
-        self.start_timeout_s = start_timeout_s
-        self.respawns = 0
-        self._ctx = mp.get_context("spawn")
-        self._queue: deque[CollectJob] = deque()
-
-    def run(self, jobs: Sequence[CollectJob], on_result: OnResult) -> None:
-        self._queue = deque(jobs)
-        if not self._queue:
-            return
-        slots = [_Slot(self._ctx, self.config) for _ in range(min(self.workers, len(jobs)))]
-        try:
-            while self._queue or any(s.job is not None for s in slots):
-                for slot in slots:
-                    self._dispatch(slot)
-                for conn in wait([s.conn for s in slots], timeout=1.0):
-                    i = next(k for k, s in enumerate(slots) if s.conn is conn)
-                    slots[i] = self._receive(slots[i], on_result)
-                now = time.monotonic()
-                for i, slot in enumerate(slots):
-                    if not slot.ready and now > slot.since + self.start_timeout_s:
-                        raise WorkerStartError(
-                            f"a collect worker did not build its env within "
-                            f"{self.start_timeout_s:.0f} s; check `python -m awda_bench doctor`"
-                        )
-                    timeout_s = job_timeout_s(self.config, slot.job)
-                    if slot.job is not None and now > slot.since + timeout_s:
-                        message = f"watchdog: job exceeded {timeout_s:g} s; worker killed"
-                        self._queue.extend(on_result(JobResult(job=slot.job, error=message)))
-                        slots[i] = self._respawn(slot)
-        finally:
-            for slot in slots:
-                if slot.process.is_alive():
-                    try:
-                        slot.conn.send(None)
-                    except OSError:
-                        pass  # already gone; kill() reaps it
-            deadline = time.monotonic() + 30
-            for slot in slots:
-                slot.process.join(timeout=max(0.0, deadline - time.monotonic()))
-                slot.kill()
-
-    def _dispatch(self, slot: _Slot) -> None:
-        if slot.ready and slot.job is None and self._queue:
-            slot.job = self._queue.popleft()
-            slot.since = time.monotonic()
-            slot.conn.send(slot.job)
-
-    def _respawn(self, slot: _Slot) -> _Slot:
-        slot.kill()
-        self.respawns += 1
-        return _Slot(self._ctx, self.config)
-
-    def _receive(self, slot: _Slot, on_result: OnResult) -> _Slot:
-        try:
-            message = slot.conn.recv()
-        except (EOFError, OSError):
-            slot.process.join(timeout=5)
-            if slot.job is not None:
-                error = f"worker died (exit code {slot.process.exitcode}) during the episode"
-                self._queue.extend(on_result(JobResult(job=slot.job, error=error)))
-                return self._respawn(slot)
-            raise WorkerStartError(
-                f"a collect worker exited (code {slot.process.exitcode}) before building its env"
-            ) from None
-        kind = message[0]
-        if kind == "ready":
-            slot.ready = True
-            slot.since = time.monotonic()
-        elif kind == "result":
-            slot.job = None
-            self._dispatch(slot)  # the worker records its next job while we write this one
-            self._queue.extend(on_result(message[1]))
-        elif kind == "fatal":
-            raise WorkerStartError(f"a collect worker could not build its env: {message[1]}")
-        return slot
+        super().__init__(
+            RecorderExecutor,
+            config,
+            workers,
+            lost=lost_job_result,
+            job_timeout_s=partial(job_timeout_s, config),
+            start_timeout_s=start_timeout_s,
+        )

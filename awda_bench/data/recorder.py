@@ -251,8 +251,8 @@ class EpisodeRecorder:
         self, env: Any, rec: _Stepper, obs: Any, job: Attempt
     ) -> tuple[bool, dict[str, Any]]:
         from awda_bench.demo_recording import SETTLE_STEPS
+        from awda_bench.episode import EpisodeContext, EpisodeSpec
         from awda_bench.experts import make_expert
-        from awda_bench.policies.base import EpisodeContext, EpisodeSpec
 
         base = env.unwrapped
         expert = make_expert(self.suite.name, _embodiment(job.role))

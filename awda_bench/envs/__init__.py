@@ -1,4 +1,5 @@
-"""ManiSkill tasks of the benchmark; importing this package registers them with gymnasium.
+"""ManiSkill tasks of the benchmark, and the empty-table scene (``AWDA-EmptyTable-v1``) that
+controller checks and benchmarks use; importing this package registers them with gymnasium.
 
 Importing it also registers the robots the tasks accept: the demonstrator
 (:mod:`awda_bench.robot.demonstrator`, whose import runs ``awda_bench.robot``'s own registration of
@@ -10,6 +11,7 @@ from awda_bench.envs import (  # noqa: F401
     basketball,
     door,
     drawer,
+    empty_table,
     nut_assembly,
     press_button,
     stack_block,

@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from awda_bench.episode import EpisodeContext, Policy
 from awda_bench.errors import UnknownChoiceError
 from awda_bench.experts.basketball import BasketballExpert
 from awda_bench.experts.door import DoorExpert
@@ -15,7 +16,6 @@ from awda_bench.experts.nut_assembly import NutAssemblyExpert
 from awda_bench.experts.pick_place import PickPlaceExpert, PickPlaceExpertConfig
 from awda_bench.experts.press_button import PressButtonExpert
 from awda_bench.experts.stack_block import StackBlockExpert
-from awda_bench.policies.base import EpisodeContext, Policy
 
 EMBODIMENT_NAMES = ("agent", "demonstrator")
 """Who the expert drives: the evaluated Panda agent or the demonstrator embodiment."""

@@ -12,7 +12,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from awda_bench.policies.base import EpisodeContext
+from awda_bench.episode import EpisodeContext
 
 
 class PickPhase(IntEnum):

@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
+from awda_bench.episode import EpisodeContext, EpisodeSpec, Policy
 from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
-from awda_bench.policies.base import EpisodeContext, EpisodeSpec, Policy
 from awda_bench.suites import Suite
 
 FrameHook = Callable[[Any], None]

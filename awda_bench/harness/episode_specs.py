@@ -15,8 +15,8 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass
 
+from awda_bench.episode import EpisodeSpec
 from awda_bench.errors import UnknownChoiceError, UsageError
-from awda_bench.policies.base import EpisodeSpec
 from awda_bench.suites import Suite
 
 PROTOCOL_VERSION = 2

@@ -1,4 +1,4 @@
-"""Method registry: a name -> how to build its :class:`~awda_bench.policies.base.Policy`.
+"""Method registry: a name -> how to build its :class:`~awda_bench.episode.Policy`.
 
 Targets are ``"module:attribute"`` strings, imported only when a method is used (so the harness
 loads without torch models, and a spawned worker rebuilds a policy from plain strings). A
@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from awda_bench.episode import Policy
 from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
-from awda_bench.policies.base import Policy
 
 BUILTIN_SNAPSHOT = "builtin"
 """Snapshot hash recorded for non-learned methods."""

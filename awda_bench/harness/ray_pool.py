@@ -1,7 +1,8 @@
-"""Workers as Ray actors: the local pools' interface (jobs in, results streamed to a callback on
-the driver) on one machine or a cluster. :class:`RayActorPool` schedules any job type;
-:class:`RayWorkerPool` is the evaluation pool (``run --backend ray``), and
-:mod:`awda_bench.data.ray_runner` the collection one (``collect --backend ray``).
+"""Workers as Ray actors: the local pool's interface (:mod:`awda_bench.harness.process_pool`: jobs
+in, results streamed to a callback on the driver) on one machine or a cluster.
+:class:`RayActorPool` schedules any job type; :class:`RayWorkerPool` is the evaluation pool
+(``run --backend ray``), and :mod:`awda_bench.data.ray_runner` the collection one
+(``collect --backend ray``).
 
 ::
 
@@ -19,7 +20,7 @@ the driver) on one machine or a cluster. :class:`RayActorPool` schedules any job
       actor or its node lost mid-job -> the job is queued again (at most LOST_WORKER_RETRIES
                                         times, then a lost(job) result), a new actor is started
 
-Differences from the local pools, and why:
+Differences from the local pool, and why:
 
 - A worker lost mid-job (killed process, lost node) re-queues the job instead of recording an
   error: on a cluster losing a node is not the episode's fault. A job that takes its worker down
@@ -29,7 +30,7 @@ Differences from the local pools, and why:
   actor is killed before its job is queued again or given up.
 - An actor that Ray cannot place (a cluster with fewer free CPUs than ``workers``) waits, and one
   that dies while starting is replaced if another actor has started; the run stops with
-  :class:`~awda_bench.harness.worker_pool.WorkerStartError` when an actor reports that it cannot
+  :class:`~awda_bench.harness.job_pool.WorkerStartError` when an actor reports that it cannot
   build its envs, or when *no* actor has started (within ``start_timeout_s``, or at all).
 
 Ray is an optional extra (``pip install -e '.[ray]'``); without it :func:`require_ray` raises a
@@ -48,17 +49,12 @@ from collections import Counter, deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from types import ModuleType
-from typing import Any, Generic, Protocol, TypeVar
+from typing import Any
 
 from awda_bench.errors import MissingExtraError, UsageError
 from awda_bench.harness.episode_record import EpisodeRecord
-from awda_bench.harness.worker_pool import (
-    EpisodeExecutor,
-    Job,
-    WorkerConfig,
-    WorkerStartError,
-    error_record,
-)
+from awda_bench.harness.job_pool import THREAD_VARS, Executor, J, JobPool, R, WorkerStartError
+from awda_bench.harness.worker_pool import EpisodeExecutor, Job, WorkerConfig, pool_settings
 from awda_bench.suites import Suite
 
 RAY_INSTALL_HINT = "pip install -e '.[ray]'"
@@ -85,15 +81,6 @@ AUTH_HINT = (
 
 CLOSE_TIMEOUT_S = 30.0
 """Time actors get to close their envs at the end of a run before they are killed [s]."""
-
-_THREAD_VARS = ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS")
-
-J = TypeVar("J")
-"""A job type."""
-R = TypeVar("R")
-"""A result type."""
-_J_in = TypeVar("_J_in", contravariant=True)
-_R_out = TypeVar("_R_out", covariant=True)
 
 
 def check_reachable(address: str) -> None:
@@ -123,14 +110,6 @@ def require_ray() -> ModuleType:
     return ray
 
 
-class Executor(Protocol[_J_in, _R_out]):
-    """What an actor holds: built once from a config, plays jobs, closes its envs."""
-
-    def play(self, job: _J_in) -> _R_out: ...
-
-    def close(self) -> None: ...
-
-
 class PoolActor:
     """One Ray actor: ``build(config)`` (an executor class or factory, importable by the actor).
 
@@ -141,7 +120,7 @@ class PoolActor:
     def __init__(self, build: Callable[[Any], Executor], config: Any, sys_path: Sequence[str]):
         missing = [p for p in sys_path if p and p not in sys.path and os.path.isdir(p)]
         sys.path[:0] = missing
-        for name in _THREAD_VARS:
+        for name in THREAD_VARS:
             os.environ[name] = "1"  # before torch/numpy are imported by the env or the policy
         self._build = build
         self._config = config
@@ -185,16 +164,17 @@ class _Slot:
     """The actor's process id (once ready)."""
 
 
-class RayActorPool(Generic[J, R]):
+class RayActorPool(JobPool[J, R]):
     """Run jobs on ``workers`` Ray actors, each holding ``build(config)``; ``on_result`` gets one
-    result per job on the driver, in arrival order.
+    result per job on the driver, in arrival order (see :class:`~awda_bench.harness.job_pool.JobPool`).
 
     ``lost(job, message, elapsed_s)`` makes the error result of a job the watchdog ended or whose
     workers kept dying. ``address=None`` starts a private local Ray instance
     (``ray.init(address="local")``, ``max(workers, cpu_count)`` CPUs); otherwise the pool joins the
     cluster at ``address`` (``"auto"``, ``"HOST:6379"``, ``"ray://HOST:10001"``). If Ray is
     already initialized in this process it is used as it is. A Ray instance the pool started is
-    shut down by :meth:`close`.
+    shut down by :meth:`close`. ``settings``: :class:`~awda_bench.harness.job_pool.JobPool`'s
+    (``lost``, ``job_timeout_s``, ``start_timeout_s``).
     """
 
     def __init__(
@@ -203,29 +183,17 @@ class RayActorPool(Generic[J, R]):
         config: Any,
         workers: int,
         *,
-        lost: Callable[[J, str, float], R],
-        job_timeout_s: float,
-        start_timeout_s: float = 600.0,
         address: str | None = None,
+        **settings: Any,
     ) -> None:
-        if workers < 1:
-            raise ValueError("workers must be >= 1")
+        super().__init__(build, config, workers, **settings)
         self._ray = require_ray()
-        self.build = build
-        self.config = config
-        self.workers = workers
-        self.lost = lost
-        self.job_timeout_s = job_timeout_s
-        self.start_timeout_s = start_timeout_s
         self.address = address
-        self.respawns = 0
-        """Actors replaced after a hang or a loss."""
         self.requeued = 0
         """Jobs queued again because their actor was lost."""
         self.connect_s = 0.0
-        """Time to start or join Ray [s] (part of :attr:`startup_s`)."""
-        self.startup_s = 0.0
-        """Connecting plus the time until every first-generation actor was ready [s]."""
+        """Time to start or join Ray [s] (part of :attr:`startup_s`, which here counts connecting
+        too)."""
         self._owns_ray = False
         self._actor_cls: Any = None
         self._slots: list[_Slot] = []
@@ -294,12 +262,6 @@ class RayActorPool(Generic[J, R]):
             slot.since = time.monotonic()
             slot.ref = slot.handle.play.remote(slot.job)
 
-    def _give_up(
-        self, slot: _Slot, message: str, queue: deque[J], on_result: Callable[[R], Any]
-    ) -> None:
-        follow = on_result(self.lost(slot.job, message, time.monotonic() - slot.since))
-        queue.extend(follow or ())
-
     def run(self, jobs: Sequence[J], on_result: Callable[[R], Iterable[J] | None]) -> None:
         """Play every job (and every follow-up job ``on_result`` returns) once."""
         ray = self._ray
@@ -315,7 +277,7 @@ class RayActorPool(Generic[J, R]):
                     self._dispatch(slot, queue)
                 now = time.monotonic()
                 deadlines = [
-                    s.since + (self.job_timeout_s if s.ready else self.start_timeout_s)
+                    s.since + (self.job_timeout_s(s.job) if s.ready else self.start_timeout_s)
                     for s in slots
                     if s.ref is not None
                 ]
@@ -342,10 +304,9 @@ class RayActorPool(Generic[J, R]):
                             "`python -m awda_bench doctor` on the nodes"
                         )
                 for i, slot in enumerate(slots):
-                    if slot.job is not None and now > slot.since + self.job_timeout_s:
-                        message = (
-                            f"watchdog: episode exceeded {self.job_timeout_s:g} s; worker killed"
-                        )
+                    limit = None if slot.job is None else self.job_timeout_s(slot.job)
+                    if limit is not None and now > slot.since + limit:
+                        message = f"watchdog: episode exceeded {limit:g} s; worker killed"
                         self._give_up(slot, message, queue, on_result)
                         slots[i] = self._respawn(slot)
         finally:
@@ -429,15 +390,5 @@ class RayWorkerPool(RayActorPool[Job, EpisodeRecord]):
         self, config: WorkerConfig, workers: int, suite: Suite, *, address: str | None = None
     ) -> None:
         self.suite = suite
-        super().__init__(
-            EpisodeExecutor,
-            config,
-            workers,
-            lost=self._error_record,
-            job_timeout_s=config.episode_timeout_s,
-            start_timeout_s=config.start_timeout_s,
-            address=address,
-        )
-
-    def _error_record(self, job: Job, message: str, elapsed_s: float) -> EpisodeRecord:
-        return error_record(job, self.suite.task(job.spec.task).family, message, elapsed_s)
+        settings = pool_settings(config, suite)
+        super().__init__(EpisodeExecutor, config, workers, address=address, **settings)

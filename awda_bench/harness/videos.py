@@ -19,13 +19,13 @@ from typing import Any
 
 import numpy as np
 
+from awda_bench.episode import EpisodeSpec
 from awda_bench.harness.episode_record import EpisodeRecord
 from awda_bench.harness.figures import fig_s5, project_points, write_mp4, write_png
 from awda_bench.harness.methods import resolve, select_snapshots
 from awda_bench.harness.results_store import ResultsStore
 from awda_bench.harness.sweep import SweepConfig, sweep_method, sweep_protocol
 from awda_bench.harness.worker_pool import EpisodeExecutor, Job, WorkerConfig
-from awda_bench.policies.base import EpisodeSpec
 from awda_bench.suites import Suite, load_suite
 
 THIRD_PERSON = "third_person"

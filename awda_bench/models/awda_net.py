@@ -14,14 +14,13 @@ With a frozen backbone, training batches carry its cached feature maps instead o
 Output coordinate convention: waypoints live in whatever frame the ``trajectory`` targets are given
 in; this project's datasets use the ManiSkill **world frame, metres**, TCP position
 (``panda_hand_tcp``). The network emits xyz directly and k attribute logits;
-:meth:`AwdaNet.predict_waypoints` turns the logits into probabilities.
+:func:`awda_bench.models.predict.predict_waypoints` turns the logits into probabilities.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-import numpy as np
 import torch
 from torch import nn
 
@@ -170,17 +169,3 @@ class AwdaNet(nn.Module):
     def waypoint_sets(self, waypoints: torch.Tensor) -> list[torch.Tensor]:
         """Split raw output ``(B, 15, 3 + k)`` into sets of 1..5 waypoints."""
         return split_waypoint_sets(waypoints, self.config.num_waypoint_sets)
-
-    def predict_waypoints(
-        self,
-        demo_frames: np.ndarray | torch.Tensor,
-        first_frame: np.ndarray | torch.Tensor,
-        head: str = "task",
-    ) -> np.ndarray:
-        """The largest waypoint set ``(5, 3 + k)``: xyz [m] + attribute probabilities.
-
-        See :func:`awda_bench.models.predict.predict_waypoints` for the accepted image formats.
-        """
-        from awda_bench.models.predict import predict_waypoints
-
-        return predict_waypoints(self, demo_frames, first_frame, head=head)

@@ -11,15 +11,11 @@ order:
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 import torch
 
 from awda_bench.errors import UnknownChoiceError, UsageError
-
-if TYPE_CHECKING:
-    from awda_bench.models.awda_net import AwdaNet
+from awda_bench.models.awda_net import HEAD_NAMES, AwdaNet
 
 
 def frames_to_tensor(
@@ -60,8 +56,6 @@ def predict_waypoints(
         first_frame: ``(H, W, 3)`` uint8 or ``(3, H, W)`` float: the agent's first frame.
         head: ``task`` (default, for real tasks) or ``synthesized``.
     """
-    from awda_bench.models.awda_net import HEAD_NAMES
-
     cfg = model.config
     if head not in HEAD_NAMES[: cfg.num_heads]:
         raise UnknownChoiceError("waypoint head", head, HEAD_NAMES[: cfg.num_heads])

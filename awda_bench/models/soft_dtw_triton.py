@@ -1,9 +1,9 @@
 # mypy: disable-error-code="no-untyped-def"
 r"""Fused Soft-DTW recursions as Triton kernels: one program per sample, every anti-diagonal inside.
 
-The reference implementation (:func:`awda_bench.models.soft_dtw.soft_dtw_forward_table`) walks the
-``N + M - 1`` anti-diagonals in a Python loop; on a GPU each diagonal is a handful of tiny kernel
-launches, forward and backward, and the multi-waypoint loss of a paper-scale AWDA step spent
+The reference implementation (:func:`awda_bench.models.soft_dtw_tables.soft_dtw_forward_table`)
+walks the ``N + M - 1`` anti-diagonals in a Python loop; on a GPU each diagonal is a handful of tiny
+kernel launches, forward and backward, and the multi-waypoint loss of a paper-scale AWDA step spent
 ~348 ms of ~470 ms there (issue 13, one H100). Here each sample's whole recursion is **one**
 program: its lanes hold one anti-diagonal (lane ``k`` is row ``i = k + 1``), read the two previous
 diagonals from the sample's table in global memory, write the new one, and meet at a barrier before
@@ -15,7 +15,7 @@ tensor of the tables' dtype (a Python float argument would be float32 inside the
 Only the recursions are fused; the squared-Euclidean cost and the chain rule from ``E`` back to
 the sequences stay ordinary batched torch ops. The tables and their borders are set up exactly as
 in the reference (same ``+inf``/``-inf`` conventions and ragged ``lengths`` seeding), so the two
-agree to rounding; ``tests/test_soft_dtw_triton.py`` checks values and gradients in float64 for
+agree to rounding; ``tests/test_soft_dtw.py`` checks values and gradients in float64 for
 ``gamma`` 1 and 0.001.
 
 On a CPU tensor the kernels run in Triton's interpreter (numpy, one diagonal per vectorized step):
@@ -30,7 +30,7 @@ import triton
 import triton.language as tl
 from triton.runtime.interpreter import InterpretedFunction
 
-from awda_bench.models.soft_dtw import backward_tables
+from awda_bench.models.soft_dtw_tables import backward_tables
 
 
 def _forward_kernel(cost_ptr, r_ptr, n, m, gamma_ptr, BLOCK: tl.constexpr):  # noqa: N803
@@ -116,7 +116,8 @@ def _block(rows: int) -> int:
 
 
 def forward_table(cost: torch.Tensor, gamma: float) -> torch.Tensor:
-    """Same table as :func:`~awda_bench.models.soft_dtw.soft_dtw_forward_table`, one launch."""
+    """Same table as :func:`~awda_bench.models.soft_dtw_tables.soft_dtw_forward_table`, in one
+    launch."""
     cost = cost.contiguous()
     b, n, m = cost.shape
     r = torch.full((b, n + 2, m + 2), float("inf"), dtype=cost.dtype, device=cost.device)
@@ -130,7 +131,8 @@ def forward_table(cost: torch.Tensor, gamma: float) -> torch.Tensor:
 def backward_table(
     cost: torch.Tensor, r: torch.Tensor, gamma: float, lengths: torch.Tensor | None
 ) -> torch.Tensor:
-    """Same ``E`` as :func:`~awda_bench.models.soft_dtw.soft_dtw_backward_table`, one launch."""
+    """Same ``E`` as :func:`~awda_bench.models.soft_dtw_tables.soft_dtw_backward_table`, in one
+    launch."""
     b, n, m = cost.shape
     c, rr, e, lengths = backward_tables(cost, r, lengths)
     _, backward = _kernels(cost.device.type != "cuda")

@@ -8,12 +8,16 @@ them); targets are known, so a fit can be checked against the truth:
   grasp flag set on the waypoints in ``grasped``; the true waypoints are kept in ``"waypoints"``
   (not used by the loss).
 - :class:`SyntheticActionDataset`: random frames and random actions in [-1, 1] (T-OSVI format).
+- :func:`random_forward_inputs`: one random batch of a network's forward-pass inputs (``describe``,
+  ``bench inference``).
 """
 
 from __future__ import annotations
 
 import torch
 
+from awda_bench.models.awda_net import AwdaNet
+from awda_bench.models.tosvi_net import TosviNet
 from awda_bench.models.waypoint_loss import interpolate_polyline
 
 WORKSPACE_LOW_M = (-0.25, -0.25, 0.02)
@@ -99,3 +103,27 @@ class SyntheticActionDataset:
         if self.depth is not None:
             sample["depth"] = self.depth[i]
         return sample
+
+
+def random_forward_inputs(
+    model: AwdaNet | TosviNet, batch: int, device: torch.device
+) -> tuple[torch.Tensor, ...]:
+    """Random positional inputs of ``model``'s forward pass at its configured image size, on
+    ``device``: AwdaNet ``(demo, first_frame, head)``, TosviNet ``(demo, frames[, depth])``."""
+    trunk = model.config.trunk
+    h, w = trunk.image_height_px, trunk.image_width_px
+    demo = torch.rand(batch, trunk.demo_frames, 3, h, w, device=device)
+    if isinstance(model, AwdaNet):
+        return (
+            demo,
+            torch.rand(batch, 3, h, w, device=device),
+            torch.zeros(batch, dtype=torch.long, device=device),
+        )
+    cfg = model.config
+    frames = torch.rand(batch, cfg.frame_stack, 3, h, w, device=device)
+    if cfg.use_depth:
+        depth = torch.rand(
+            batch, cfg.frame_stack, 1, cfg.depth_height_px, cfg.depth_width_px, device=device
+        )
+        return demo, frames, depth
+    return demo, frames

@@ -1,1 +1,1 @@
-"""Policies (methods) behind one interface; see :mod:`awda_bench.policies.base`."""
+"""Policies (methods) behind one interface; see :mod:`awda_bench.episode`."""

@@ -22,10 +22,10 @@ from typing import Any
 
 import numpy as np
 
+from awda_bench.episode import EpisodeContext
 from awda_bench.errors import CorruptFileError, UsageError
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig
-from awda_bench.policies.base import EpisodeContext
 from awda_bench.policies.gt_waypoints import robot_states
 from awda_bench.primitives.config import CENTRE_SUFFIX, ExecutorConfig, LocalizationConfig
 from awda_bench.primitives.executor import WaypointExecutor

@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from awda_bench.episode import EpisodeContext, EpisodeSpec, Policy
 from awda_bench.mining import GraspMiningConfig, PressMiningConfig, mine_grasp, mine_press
-from awda_bench.policies.base import EpisodeContext, EpisodeSpec, Policy
 from awda_bench.primitives.base import RobotState
 from awda_bench.primitives.config import CENTRE_SUFFIX, ExecutorConfig, LocalizationConfig
 from awda_bench.primitives.executor import WaypointExecutor

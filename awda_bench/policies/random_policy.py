@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.policies.base import EpisodeContext
+from awda_bench.episode import EpisodeContext
 
 
 class RandomPolicy:

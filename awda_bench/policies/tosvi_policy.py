@@ -35,8 +35,8 @@ from typing import Any
 
 import numpy as np
 
+from awda_bench.episode import EpisodeContext
 from awda_bench.errors import CorruptFileError, UnknownChoiceError
-from awda_bench.policies.base import EpisodeContext
 
 ACTION_SELECTS: tuple[str, ...] = ("sample", "mean", "mode")
 """How an action is read from the predicted mixture; the first is the default."""

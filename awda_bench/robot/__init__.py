@@ -3,5 +3,3 @@
 from awda_bench.robot.agent import CONTROL_MODE, WRIST_CAMERA, PandaAWDA
 
 __all__ = ["CONTROL_MODE", "WRIST_CAMERA", "PandaAWDA"]
-
-from awda_bench.robot import empty_table as _empty_table  # noqa: E402,F401  (registers AWDA-EmptyTable-v1)

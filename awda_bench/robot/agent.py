@@ -21,7 +21,7 @@ from mani_skill.agents.robots.panda.panda import Panda
 from mani_skill.sensors.camera import CameraConfig
 
 from awda_bench.robot.action import ACTION_DIM, validate_action
-from awda_bench.robot.controller import BinaryGripperControllerConfig, MinkEEPosControllerConfig
+from awda_bench.robot.controller import MinkEEPosControllerConfig, panda_gripper_config
 
 CONTROL_MODE = "pd_ee_delta_pos_mink"
 """The 4-D action space of the method, driven by mink IK."""
@@ -101,16 +101,7 @@ class PandaAWDA(Panda):
             force_limit=self.arm_force_limit,
             drive_mode=self.mink_arm_drive_mode,
         )
-        gripper = BinaryGripperControllerConfig(
-            joint_names=self.gripper_joint_names,
-            lower=-0.01,
-            upper=0.04,
-            stiffness=self.gripper_stiffness,
-            damping=self.gripper_damping,
-            force_limit=self.gripper_force_limit,
-            mimic={"panda_finger_joint2": {"joint": "panda_finger_joint1"}},
-        )
-        configs = {CONTROL_MODE: {"arm": arm, "gripper": gripper}}
+        configs = {CONTROL_MODE: {"arm": arm, "gripper": panda_gripper_config(self)}}
         configs.update(super()._controller_configs)
         return copy.deepcopy(configs)
 

@@ -52,7 +52,7 @@ from mani_skill.agents.controllers.pd_joint_pos import (
 from mani_skill.utils import common
 
 from awda_bench.robot.ik import IKConfig, PandaIK
-from awda_bench.robot.tcp_target import advance_target
+from awda_bench.robot.tcp_target import advance_target, check_target_bounds
 
 
 class MinkEEPosController(PDJointPosController):
@@ -212,14 +212,7 @@ class MinkEEPosControllerConfig(PDJointPosControllerConfig):
     controller_cls = MinkEEPosController
 
     def __post_init__(self) -> None:
-        if not self.max_step_m > 0:
-            raise ValueError(f"max_step_m must be > 0, got {self.max_step_m}")
-        if any(
-            lo >= hi for lo, hi in zip(self.workspace_low_m, self.workspace_high_m, strict=True)
-        ):
-            raise ValueError(
-                f"workspace_low_m {self.workspace_low_m} must be below workspace_high_m {self.workspace_high_m}"
-            )
+        check_target_bounds(self.max_step_m, self.workspace_low_m, self.workspace_high_m)
 
 
 class BinaryGripperController(PDJointPosMimicController):
@@ -303,3 +296,18 @@ class BinaryGripperControllerConfig(PDJointPosMimicControllerConfig):
     """Finger joint target when open [m] (the joint's upper limit)."""
     normalize_action: bool = False
     controller_cls = BinaryGripperController
+
+
+def panda_gripper_config(agent: Any) -> BinaryGripperControllerConfig:
+    """The binary gripper controller of a Panda hand, as both embodiments drive it: the second
+    finger mimics the first, the drives take ``agent``'s gripper stiffness, damping and force
+    limit (``agent``: a ManiSkill Panda or Panda-hand agent)."""
+    return BinaryGripperControllerConfig(
+        joint_names=agent.gripper_joint_names,
+        lower=-0.01,
+        upper=0.04,
+        stiffness=agent.gripper_stiffness,
+        damping=agent.gripper_damping,
+        force_limit=agent.gripper_force_limit,
+        mimic={"panda_finger_joint2": {"joint": "panda_finger_joint1"}},
+    )

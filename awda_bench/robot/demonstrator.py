@@ -38,8 +38,8 @@ from mani_skill.agents.robots.floating_panda_gripper import FloatingPandaGripper
 from mani_skill.utils import common
 from mani_skill.utils.structs.actor import Actor
 
-from awda_bench.robot.controller import BinaryGripperControllerConfig
-from awda_bench.robot.tcp_target import advance_target
+from awda_bench.robot.controller import panda_gripper_config
+from awda_bench.robot.tcp_target import advance_target, check_target_bounds
 
 DEMONSTRATOR_UID = "awda_demonstrator"
 """ManiSkill agent uid of the demonstrator."""
@@ -122,15 +122,7 @@ class FloatingDeltaPosControllerConfig(PDJointPosControllerConfig):
     controller_cls = FloatingDeltaPosController
 
     def __post_init__(self) -> None:
-        if not self.max_step_m > 0:
-            raise ValueError(f"max_step_m must be > 0, got {self.max_step_m}")
-        if any(
-            lo >= hi for lo, hi in zip(self.workspace_low_m, self.workspace_high_m, strict=True)
-        ):
-            raise ValueError(
-                f"workspace_low_m {self.workspace_low_m} must be below "
-                f"workspace_high_m {self.workspace_high_m}"
-            )
+        check_target_bounds(self.max_step_m, self.workspace_low_m, self.workspace_high_m)
 
 
 @register_agent()
@@ -163,16 +155,7 @@ class AwdaDemonstrator(FloatingPandaGripper):
             force_limit=self.root_force_limit,
         )
         # the agent's gripper controller: action[3] > 0 closes, the command is controller state
-        gripper = BinaryGripperControllerConfig(
-            joint_names=self.gripper_joint_names,
-            lower=-0.01,
-            upper=0.04,
-            stiffness=self.gripper_stiffness,
-            damping=self.gripper_damping,
-            force_limit=self.gripper_force_limit,
-            mimic={"panda_finger_joint2": {"joint": "panda_finger_joint1"}},
-        )
-        return {DEMONSTRATOR_CONTROL_MODE: dict(arm=root, gripper=gripper)}
+        return {DEMONSTRATOR_CONTROL_MODE: dict(arm=root, gripper=panda_gripper_config(self))}
 
     def _after_init(self) -> None:
         super()._after_init()

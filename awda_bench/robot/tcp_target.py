@@ -13,6 +13,8 @@ moved the TCP 0.8 cm and 0.4 mm moved it not at all). Two bounds keep the target
   the target stops ``max_lag_m + |delta|`` beyond the contact instead of winding up: a reversed
   command moves the TCP again on the next step, and the contact force follows the command
   (a small push presses gently, a full-scale push hard) instead of growing with time.
+
+:func:`check_target_bounds` refuses a controller config whose step or box cannot work.
 """
 
 from __future__ import annotations
@@ -42,3 +44,14 @@ def advance_target(
         scale = np.minimum(1.0, max_reach_xy_m / np.maximum(radius, 1e-12))
         nxt[..., :2] *= scale[..., None]
     return nxt
+
+
+def check_target_bounds(
+    max_step_m: float, low: tuple[float, float, float], high: tuple[float, float, float]
+) -> None:
+    """``ValueError`` unless a controller config's unit step is > 0 and its workspace box's
+    ``low`` corner is below its ``high`` corner on every axis (both embodiments' configs)."""
+    if not max_step_m > 0:
+        raise ValueError(f"max_step_m must be > 0, got {max_step_m}")
+    if any(lo >= hi for lo, hi in zip(low, high, strict=True)):
+        raise ValueError(f"workspace_low_m {low} must be below workspace_high_m {high}")

@@ -4,7 +4,7 @@ Data flows one way::
 
     recipes/<name>.toml --recipe.py--> Recipe      (method, ablation) --columns.py--> Column
     DATA_DIR --awda_bench.data.datasets--> samples --augment.py (shift, jitter, ADM)--> batches
-        --awda_bench.models.train (the resumable loop)--> CKPT_DIR/snapshot-*.pt
+        --loop.py (the resumable loop)--> CKPT_DIR/snapshot-*.pt
         --logbook.py--> metrics.csv, tensorboard/, learning_curve.png
     run.py checks everything first and writes CKPT_DIR/train.json; commands/train.py is the CLI.
 """

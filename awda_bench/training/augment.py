@@ -90,7 +90,7 @@ def asymmetric_demo_mixup(
 
 @dataclass(frozen=True)
 class BatchTreatment:
-    """The transform :func:`awda_bench.models.train.train` applies to each training batch."""
+    """The transform :func:`awda_bench.training.loop.train` applies to each training batch."""
 
     augment: AugmentRecipe
     """Shift, jitter and ADM parameters."""

@@ -9,7 +9,7 @@ Order of work, so that bad input never touches CKPT_DIR::
        first and last samples read (a damaged file is found now)
     -> CKPT_DIR: new/empty, or one whose train.json names the same column, recipe, data and
        hold-out (then training resumes from its latest snapshot)
-    -> train.json, then the loop (models/train.py): snapshots every N steps, each recording
+    -> train.json, then the loop (training/loop.py): snapshots every N steps, each recording
        the column, recipe and dataset fingerprint; metrics.csv, TensorBoard scalars,
        learning_curve.png (training/logbook.py)
 
@@ -45,12 +45,12 @@ from awda_bench.models.config import (
 )
 from awda_bench.models.frame_encoder import build_frame_encoder
 from awda_bench.models.tosvi_net import TosviNet
-from awda_bench.models.train import SampleDataset, TrainResult, resolve_device, train
 from awda_bench.training.augment import BatchTreatment
 from awda_bench.training.columns import Column, column_for
 from awda_bench.training.feature_cache import load_or_build
 from awda_bench.training.feature_datasets import CachedAwdaPairs, frames_needed
 from awda_bench.training.logbook import Logbook, plot_learning_curve
+from awda_bench.training.loop import SampleDataset, TrainResult, resolve_device, train
 from awda_bench.training.recipe import Recipe, load_recipe
 
 TRAIN_JSON = "train.json"

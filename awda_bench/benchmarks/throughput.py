@@ -23,8 +23,8 @@ import sqlite3
 import tempfile
 from pathlib import Path
 
+from awda_bench.benchmarks.core_scaling import measure_core_scaling
 from awda_bench.harness.backends import BACKENDS
-from awda_bench.harness.core_scaling import measure_core_scaling
 from awda_bench.harness.methods import DEFAULT_METHOD
 from awda_bench.harness.results_store import STORE_NAME
 from awda_bench.harness.sweep import SweepConfig, SweepResult, run_sweep

@@ -1,7 +1,8 @@
 """The training loop: Adam on ``model.compute_loss(batch)``, snapshots every N steps, resumable.
 
 Works on any map-style dataset (``len(ds)``, ``ds[i] -> dict[str, Tensor]``) whose samples stack
-into the model's batch format (:mod:`awda_bench.models.awda_net`, :mod:`~.tosvi_net`).
+into the model's batch format (:mod:`awda_bench.models.awda_net`,
+:mod:`awda_bench.models.tosvi_net`).
 
 Batch order is a function of ``(seed, step)`` only: the sample at global position
 ``p = step * batch_size + i`` is ``perm(seed, p // len(ds))[p % len(ds)]`` (a fresh permutation per

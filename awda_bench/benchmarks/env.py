@@ -49,8 +49,8 @@ def add_env_args(parser: argparse.ArgumentParser) -> None:
 
 def _time_expert(env, suite, task: int, episodes: int) -> tuple[int, float, float]:
     """Run ``episodes`` expert episodes; return (steps, total seconds, seconds inside env.step)."""
+    from awda_bench.episode import EpisodeContext, EpisodeSpec
     from awda_bench.experts import make_expert
-    from awda_bench.policies.base import EpisodeContext, EpisodeSpec
 
     base = env.unwrapped
     steps, total, in_step = 0, 0.0, 0.0

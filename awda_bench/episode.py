@@ -1,4 +1,8 @@
-"""The interface every evaluated method implements, and what it is handed per episode.
+"""The episode protocol: what one episode is, what a policy is handed, the interface it implements.
+
+:class:`EpisodeSpec`, :class:`EpisodeContext` and :class:`Policy` are shared by everything that
+plays episodes (the scripted experts, demo recording, the primitives, the evaluated methods, the
+harness and the collector), so they sit below all of them and import nothing of the package.
 
 Timeline of one episode (``T = suite.horizon_steps`` control steps)::
 

@@ -15,6 +15,7 @@ import torch
 
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.cli_options import add_model_args, model_from_args
+from awda_bench.models.synthetic import random_forward_inputs
 from awda_bench.models.tosvi_net import TosviNet
 
 
@@ -30,34 +31,12 @@ def add_inference_args(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def _inputs(
-    model: AwdaNet | TosviNet, batch: int, device: torch.device
-) -> tuple[torch.Tensor, ...]:
-    trunk = model.config.trunk
-    h, w = trunk.image_height_px, trunk.image_width_px
-    demo = torch.rand(batch, trunk.demo_frames, 3, h, w, device=device)
-    if isinstance(model, AwdaNet):
-        return (
-            demo,
-            torch.rand(batch, 3, h, w, device=device),
-            torch.zeros(batch, dtype=torch.long, device=device),
-        )
-    cfg = model.config
-    frames = torch.rand(batch, cfg.frame_stack, 3, h, w, device=device)
-    if cfg.use_depth:
-        depth = torch.rand(
-            batch, cfg.frame_stack, 1, cfg.depth_height_px, cfg.depth_width_px, device=device
-        )
-        return demo, frames, depth
-    return demo, frames
-
-
 def time_forward(
     model: AwdaNet | TosviNet, device: torch.device, *, batch: int, repeats: int, warmup: int
 ) -> list[float]:
     """Wall-clock seconds of ``repeats`` forward passes (after ``warmup``) on ``device``."""
     model = model.to(device).eval()
-    inputs = _inputs(model, batch, device)
+    inputs = random_forward_inputs(model, batch, device)
     times: list[float] = []
     with torch.inference_mode():
         for i in range(warmup + repeats):

@@ -72,7 +72,7 @@ def run_controller_bench(args: argparse.Namespace) -> int:
 def _fidelity_scene(env_id: str, robot: str, targets: int) -> None:
     import gymnasium as gym
 
-    from awda_bench.robot.controller_fidelity import format_fidelity, measure_fidelity
+    from awda_bench.benchmarks.controller_fidelity import format_fidelity, measure_fidelity
 
     env = gym.make(
         env_id,
