@@ -19,13 +19,13 @@ in; this project's datasets use the ManiSkill **world frame, metres**, TCP posit
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import torch
 from torch import nn
 
 from awda_bench.errors import UsageError
-from awda_bench.models.config import AwdaConfig
+from awda_bench.models.config import CELL_HEADS, AwdaConfig
 from awda_bench.models.demo_pointer import DemoPointer
 from awda_bench.models.demo_to_scene import DemoToScene
 from awda_bench.models.frame_encoder import feature_map_size
@@ -60,37 +60,28 @@ class AwdaNet(nn.Module):
         self.trunk = VisualTrunk(config.trunk, load_backbone_weights)
         trunk = config.trunk
         self.scene_head: DemoToScene | DemoPointer | None = None
-        if trunk.head == "demo-pointer":
-            self.scene_head = DemoPointer(
-                channels=self.trunk.channels,
-                grid=feature_map_size(trunk, trunk.image_height_px, trunk.image_width_px),
-                demo_frames=trunk.demo_frames,
-                dim=trunk.attention_heads * trunk.attention_head_dim,
-                queries=trunk.attention_heads,
-                dropout=trunk.dropout,
-                hidden=config.head_hidden_dim,
-                waypoints=config.total_waypoints,
-                waypoint_dim=config.waypoint_dim,
-                num_heads=config.num_heads,
-                camera=_camera(config),
-            )
-            return
-        if trunk.head == "demo-to-scene":
-            self.scene_head = DemoToScene(
-                channels=self.trunk.channels,
-                grid=feature_map_size(trunk, trunk.image_height_px, trunk.image_width_px),
-                demo_frames=trunk.demo_frames,
-                dim=trunk.attention_heads * trunk.attention_head_dim,
-                heads=trunk.attention_heads,
-                layers=trunk.attention_layers,
-                dropout=trunk.dropout,
-                hidden=config.head_hidden_dim,
-                waypoints=config.total_waypoints,
-                waypoint_dim=config.waypoint_dim,
-                num_heads=config.num_heads,
-                camera=_camera(config),
-                demo_reference=config.demo_reference_frame,
-            )
+        if trunk.head in CELL_HEADS:
+            cell_head: dict[str, Any] = {
+                "channels": self.trunk.channels,
+                "grid": feature_map_size(trunk, trunk.image_height_px, trunk.image_width_px),
+                "demo_frames": trunk.demo_frames,
+                "dim": trunk.attention_heads * trunk.attention_head_dim,
+                "dropout": trunk.dropout,
+                "hidden": config.head_hidden_dim,
+                "waypoints": config.total_waypoints,
+                "waypoint_dim": config.waypoint_dim,
+                "num_heads": config.num_heads,
+                "camera": _camera(config),
+            }
+            if trunk.head == "demo-pointer":
+                self.scene_head = DemoPointer(queries=trunk.attention_heads, **cell_head)
+            else:
+                self.scene_head = DemoToScene(
+                    heads=trunk.attention_heads,
+                    layers=trunk.attention_layers,
+                    demo_reference=config.demo_reference_frame,
+                    **cell_head,
+                )
             return
         out = config.total_waypoints * config.waypoint_dim
         self.heads = nn.ModuleList(
