@@ -1,0 +1,92 @@
+"""Observation-only episodes: a method that is not privileged gets a context without the
+simulator; reaching for ``ctx.env`` fails that episode as an *error* naming the rule, and the run
+goes on. A privileged method reads it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from harness_fakes import write_fake_suite
+
+from awda_bench.episode import EpisodeContext, EpisodeSpec, is_privileged
+from awda_bench.errors import PrivilegedAccessError
+from awda_bench.harness.methods import MethodSpec, register_method, unregister_method
+from awda_bench.harness.results_store import ResultsStore
+from awda_bench.harness.sweep import SweepConfig, run_sweep
+
+METHODS = (
+    MethodSpec("env-reading", "harness_fakes:EnvReadingPolicy"),
+    MethodSpec("privileged-env-reading", "harness_fakes:PrivilegedEnvReadingPolicy"),
+)
+
+
+@pytest.fixture(autouse=True)
+def fake_methods():
+    for spec in METHODS:
+        register_method(spec)
+    yield
+    for spec in METHODS:
+        unregister_method(spec.name)
+
+
+def _sweep(tmp_path: Path, method: str):
+    suites = tmp_path / "tasks"
+    suites.mkdir(exist_ok=True)
+    write_fake_suite(suites)
+    out = tmp_path / method
+    config = SweepConfig(
+        suite="fake",
+        out=out,
+        suites_dir=suites,
+        progress=False,
+        command="test",
+        method=method,
+        workers=0,
+        episodes=3,
+    )
+    return run_sweep(config), out
+
+
+def test_reading_the_env_is_an_error_naming_the_rule_and_the_run_goes_on(tmp_path: Path) -> None:
+    result, out = _sweep(tmp_path, "env-reading")
+    assert (result.ran, result.errors) == (6, 2)  # episode 1 of each held-out task
+    with ResultsStore(out, create=False) as store:
+        rows = store.raw("SELECT task, episode, status, error, success_once FROM episodes")
+    errors = [(t, e, msg) for t, e, status, msg, _ in rows if status == "error"]
+    assert [(t, e) for t, e, _ in errors] == [(2, 1), (3, 1)]
+    for *_, msg in errors:
+        assert "PrivilegedAccessError" in msg
+        assert "'env-reading' is not privileged" in msg and "ctx.observations" in msg
+    ok = [r for r in rows if r[2] == "ok"]
+    assert len(ok) == 4 and all(r[4] is not None for r in ok)  # played to the end, judged
+
+
+def test_a_privileged_method_reads_the_env(tmp_path: Path) -> None:
+    result, _ = _sweep(tmp_path, "privileged-env-reading")
+    assert (result.ran, result.errors) == (6, 0)
+
+
+def test_the_builtin_methods_declare_what_they_are() -> None:
+    from awda_bench.policies.gt_waypoints import GTWaypointsPolicy
+    from awda_bench.policies.random_policy import RandomPolicy
+    from awda_bench.policies.scripted import ScriptedPolicy
+    from awda_bench.policies.tosvi_policy import TosviPolicy
+
+    assert is_privileged(GTWaypointsPolicy) and is_privileged(ScriptedPolicy)
+    assert not is_privileged(RandomPolicy) and not is_privileged(TosviPolicy)
+    from awda_bench.policies.awda_policy import AWDAPolicy
+
+    assert not is_privileged(AWDAPolicy)
+
+
+def test_a_context_without_the_env_says_so_in_one_line() -> None:
+    spec = EpisodeSpec(suite="fake", task=0, episode=0, seed=1, demo_seed=2)
+    ctx = EpisodeContext(env=None, spec=spec, method="mine")
+    assert not ctx.privileged
+    with pytest.raises(PrivilegedAccessError) as caught:
+        _ = ctx.env
+    message = str(caught.value)
+    assert len(message.splitlines()) == 1
+    assert "'mine' is not privileged" in message and "privileged = True" in message
+    assert EpisodeContext(env=object(), spec=spec).privileged
