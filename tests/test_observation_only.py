@@ -90,3 +90,39 @@ def test_a_context_without_the_env_says_so_in_one_line() -> None:
     assert len(message.splitlines()) == 1
     assert "'mine' is not privileged" in message and "privileged = True" in message
     assert EpisodeContext(env=object(), spec=spec).privileged
+
+
+@pytest.mark.slow
+def test_the_observations_have_the_documented_shapes_on_the_real_env() -> None:
+    import numpy as np
+
+    from awda_bench.harness.env_factory import make_env
+    from awda_bench.harness.episode_runner import fresh_scene_options
+    from awda_bench.harness.observations import SimObservations
+    from awda_bench.suites import load_suite
+
+    suite = load_suite("pick_place")
+    env = make_env(suite)
+    try:
+        spec = EpisodeSpec(suite="pick_place", task=14, episode=0, seed=5, demo_seed=6)
+        env.reset(seed=spec.seed, options=fresh_scene_options(suite, spec.task))
+        extras: dict = {}
+        obs = SimObservations(env.unwrapped, spec, suite, extras)
+        first = obs.first_frame()
+        assert first.shape == (240, 320, 3) and first.dtype == np.uint8
+        assert obs.rgb().shape == (1, 240, 320, 3)
+        depth = obs.wrist_depth()
+        assert depth.depth_m.shape == (1, 128, 128) and depth.depth_m.dtype == np.float32
+        assert depth.intrinsic_cv.shape == (1, 3, 3) and depth.cam2world_cv.shape == (1, 4, 4)
+        intrinsic, extrinsic = obs.camera()
+        assert intrinsic.shape == (3, 3) and extrinsic.shape == (3, 4)
+        proprio = obs.proprio()
+        assert proprio.tcp_pos.shape == (1, 3) and proprio.tcp_quat.shape == (1, 4)
+        assert proprio.qpos.shape == (1, 9) and proprio.gripper_opening_m.shape == (1,)
+        np.testing.assert_allclose(proprio.gripper_opening_m, proprio.qpos[:, -2:].sum(1))
+        assert 0.0 < proprio.tcp_pos[0, 2] < 0.6  # above the table, in reach
+        env.step(np.zeros((1, 4), np.float32))
+        obs.mark_stepped()
+        assert obs.first_frame() is extras["first_frame"]  # kept from reset, not re-rendered
+    finally:
+        env.close()

@@ -5,7 +5,7 @@ Each call renders (or reads) exactly what it names, through the same functions t
 called on the env before the boundary (:mod:`awda_bench.robot.cameras`,
 :func:`awda_bench.demo_recording.demo_video_frames`), so an observation-only episode renders the
 same frames in the same order as before and its record is unchanged. The demonstrator's envs are
-built once per process (:data:`_DEMO_ENVS`) and the demo videos cached there as before.
+built once per process (:data:`DEMO_ENVS`) and the demo videos cached there as before.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 from awda_bench.episode import EpisodeSpec, Proprioception, WristDepth
 from awda_bench.suites import Suite
 
-_DEMO_ENVS: dict[tuple[str, str], Any] = {}
+DEMO_ENVS: dict[tuple[str, str], Any] = {}
 """Demonstrator envs of this process, one per (env id, embodiment), built on first use."""
 
 
@@ -50,7 +50,7 @@ class SimObservations:
         if cached is not None and len(cached) == count:
             return np.asarray(cached)
         video = demo_video_frames(
-            self._suite, self._spec.task, self._spec.demo_seed, _DEMO_ENVS, count
+            self._suite, self._spec.task, self._spec.demo_seed, DEMO_ENVS, count
         )
         self._extras["demo_frames"] = list(video)
         return video
