@@ -126,3 +126,25 @@ def test_the_observations_have_the_documented_shapes_on_the_real_env() -> None:
         assert obs.first_frame() is extras["first_frame"]  # kept from reset, not re-rendered
     finally:
         env.close()
+
+
+def test_the_first_frame_is_the_one_at_reset(monkeypatch: pytest.MonkeyPatch) -> None:
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    from awda_bench.harness.observations import SimObservations
+
+    renders = iter(np.full((1, 2, 2, 3), i, np.uint8) for i in range(10))
+    monkeypatch.setattr("awda_bench.robot.cameras.capture_rgb", lambda env: next(renders))
+    spec = EpisodeSpec(suite="fake", task=0, episode=0, seed=1, demo_seed=2)
+    extras: dict = {}
+    obs = SimObservations(SimpleNamespace(num_envs=1), spec, None, extras)  # type: ignore[arg-type]
+    assert obs.first_frame()[0, 0, 0] == 0 and extras["first_frame"][0, 0, 0] == 0
+    obs.mark_stepped()
+    assert obs.first_frame()[0, 0, 0] == 0  # kept, not rendered again
+    assert obs.rgb()[0, 0, 0, 0] == 1  # now
+    late = SimObservations(SimpleNamespace(num_envs=1), spec, None, {})  # type: ignore[arg-type]
+    late.mark_stepped()
+    with pytest.raises(RuntimeError, match="call it in reset"):
+        late.first_frame()
