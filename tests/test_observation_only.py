@@ -17,7 +17,9 @@ from awda_bench.harness.sweep import SweepConfig, run_sweep
 
 METHODS = (
     MethodSpec("env-reading", "harness_fakes:EnvReadingPolicy"),
-    MethodSpec("privileged-env-reading", "harness_fakes:PrivilegedEnvReadingPolicy"),
+    MethodSpec(
+        "privileged-env-reading", "harness_fakes:PrivilegedEnvReadingPolicy", privileged=True
+    ),
 )
 
 
@@ -30,11 +32,11 @@ def fake_methods():
         unregister_method(spec.name)
 
 
-def _sweep(tmp_path: Path, method: str):
+def _sweep(tmp_path: Path, method: str, out: Path | None = None):
     suites = tmp_path / "tasks"
     suites.mkdir(exist_ok=True)
     write_fake_suite(suites)
-    out = tmp_path / method
+    out = out or tmp_path / method
     config = SweepConfig(
         suite="fake",
         out=out,
@@ -65,6 +67,28 @@ def test_reading_the_env_is_an_error_naming_the_rule_and_the_run_goes_on(tmp_pat
 def test_a_privileged_method_reads_the_env(tmp_path: Path) -> None:
     result, _ = _sweep(tmp_path, "privileged-env-reading")
     assert (result.ran, result.errors) == (6, 0)
+
+
+def test_the_tables_mark_the_privileged_rows(tmp_path: Path) -> None:
+    from awda_bench.harness.report import write_report
+
+    out = tmp_path / "store"
+    _sweep(tmp_path, "privileged-env-reading", out)
+    _sweep(tmp_path, "env-reading", out)
+    write_report(out, tmp_path / "report")
+    header = (tmp_path / "report" / "s3.md").read_text().splitlines()[0]
+    columns = [c.strip() for c in header.strip("|").split("|")]
+    assert columns[1:] == ["env-reading", "privileged-env-reading (privileged)"]
+
+
+def test_a_declaration_that_disagrees_with_the_registration_is_refused() -> None:
+    from awda_bench.errors import UsageError
+    from awda_bench.harness.methods import BUILTIN_SNAPSHOT, SnapshotRef, make_policy
+
+    snapshot = SnapshotRef(BUILTIN_SNAPSHOT, BUILTIN_SNAPSHOT, None, 0)
+    unflagged = MethodSpec("unflagged", "harness_fakes:PrivilegedEnvReadingPolicy")
+    with pytest.raises(UsageError, match="declares privileged = True but the method is regis"):
+        make_policy(unflagged, snapshot)
 
 
 def test_the_builtin_methods_declare_what_they_are() -> None:

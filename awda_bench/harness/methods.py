@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from awda_bench.episode import Policy
+from awda_bench.episode import Policy, is_privileged
 from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
 
 BUILTIN_SNAPSHOT = "builtin"
@@ -55,6 +55,9 @@ class MethodSpec:
     """``"module:attribute"`` of ``load_snapshot(path)``, raising on a corrupt file."""
     description: str = ""
     """One line for ``--help``."""
+    privileged: bool = False
+    """The policy reads the simulator (its ``privileged`` class attribute, which
+    :func:`make_policy` checks against this); its rows are marked in the tables."""
 
 
 @dataclass(frozen=True)
@@ -104,11 +107,17 @@ def get_method(name: str) -> MethodSpec:
                 name=name,
                 target=name,
                 learned=True,
+                privileged=is_privileged(factory),
                 list_snapshots=f"{name}.{SNAPSHOT_HOOKS[0]}",
                 load_snapshot=f"{name}.{SNAPSHOT_HOOKS[1]}",
                 description="imported learned policy",
             )
-        return MethodSpec(name=name, target=name, description="imported policy")
+        return MethodSpec(
+            name=name,
+            target=name,
+            description="imported policy",
+            privileged=is_privileged(factory),
+        )
     raise UnknownChoiceError("method", name, [*method_names(), "module:attribute"])
 
 
@@ -136,6 +145,11 @@ def make_policy(spec: MethodSpec, snapshot: SnapshotRef) -> Policy:
     policy = factory(snapshot.path) if spec.learned else factory()
     if not isinstance(policy, Policy):
         raise UsageError(f"method {spec.name!r}: {spec.target} did not return a Policy")
+    if is_privileged(policy) != spec.privileged:
+        raise UsageError(
+            f"method {spec.name!r}: its policy declares privileged = {is_privileged(policy)} "
+            f"but the method is registered with privileged = {spec.privileged}; make them agree"
+        )
     return policy
 
 
@@ -193,21 +207,25 @@ for _spec in (
     MethodSpec(
         "gt-waypoints",
         "awda_bench.policies.gt_waypoints:GTWaypointsPolicy",
+        privileged=True,
         description="privileged: ground-truth attributed waypoints executed by the primitives",
     ),
     MethodSpec(
         "gt-waypoints-k3",
         "awda_bench.policies.gt_waypoints:gt_waypoints_k3",
+        privileged=True,
         description="gt-waypoints with K = 3 waypoints (--num-waypoints 3)",
     ),
     MethodSpec(
         "gt-waypoints-k8",
         "awda_bench.policies.gt_waypoints:gt_waypoints_k8",
+        privileged=True,
         description="gt-waypoints with K = 8 waypoints (--num-waypoints 8)",
     ),
     MethodSpec(
         "scripted",
         "awda_bench.policies.scripted:ScriptedPolicy",
+        privileged=True,
         description="privileged: scripted expert",
     ),
     MethodSpec(
@@ -219,6 +237,7 @@ for _spec in (
     MethodSpec(
         "gt-waypoints-centre",
         "awda_bench.policies.gt_waypoints:gt_waypoints_centre",
+        privileged=True,
         description="gt-waypoints, grasps take the depth component nearest the image centre "
         "(the reference's rule; --grasp-select centre)",
     ),
