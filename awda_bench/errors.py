@@ -46,3 +46,7 @@ class ProtocolMismatchError(UsageError):
 
 class MissingExtraError(UsageError):
     """An option needs an optional dependency (an extra) that is not installed."""
+
+
+class PrivilegedAccessError(AwdaError):
+    """A method that is not privileged reached for the simulator (``ctx.env``)."""

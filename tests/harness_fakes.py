@@ -146,6 +146,35 @@ class RaisingPolicy(SkillPolicy):
         return super().act(obs)
 
 
+class EnvReadingPolicy(SkillPolicy):
+    """Reaches for the simulator (``ctx.env``) on episode 1, as an observation-only method must
+    not; records what ``act`` is handed."""
+
+    name = "env-reading"
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        super().reset(ctx)
+        self.observations = ctx.observations
+        if ctx.spec.episode == 1:
+            self.env_name = type(ctx.env).__name__
+
+    def act(self, obs: Any) -> np.ndarray:
+        if obs is not self.observations:
+            raise AssertionError(f"act got {type(obs).__name__}, not the episode's observations")
+        return super().act(obs)
+
+
+class PrivilegedEnvReadingPolicy(SkillPolicy):
+    """Declares itself privileged and reads ``ctx.env`` every episode (allowed)."""
+
+    name = "privileged-env-reading"
+    privileged = True
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        super().reset(ctx)
+        self.env_name = type(ctx.env).__name__
+
+
 class HangingPolicy(SkillPolicy):
     """Hangs (like a stuck renderer) on episode 1 unless AWDA_FAKE_NO_HANG is set."""
 

@@ -278,8 +278,6 @@ def test_ray_votes_pass_through_the_point_their_cell_images() -> None:
 
 
 def test_a_ray_voting_snapshot_refuses_another_camera() -> None:
-    from types import SimpleNamespace
-
     from awda_bench.policies.awda_policy import check_camera
 
     k = np.array([[219.66, 0.0, 160.0], [0.0, 219.66, 120.0], [0.0, 0.0, 1.0]])
@@ -293,22 +291,12 @@ def test_a_ray_voting_snapshot_refuses_another_camera() -> None:
         camera_size=(240, 320),
     )
 
-    def env_with(extrinsic: np.ndarray) -> SimpleNamespace:
-        params = {
-            "intrinsic_cv": torch.tensor(k)[None],
-            "extrinsic_cv": torch.tensor(extrinsic)[None],
-        }
-        sensor = SimpleNamespace(get_params=lambda: params)
-        return SimpleNamespace(
-            unwrapped=SimpleNamespace(scene=SimpleNamespace(sensors={"third_person": sensor}))
-        )
-
-    check_camera(config, env_with(e))  # the training camera: accepted
+    check_camera(config, (k, e))  # the training camera: accepted
     moved = e.copy()
     moved[0, 3] += 0.05  # the camera 5 cm to the side
     with pytest.raises(UsageError, match="camera"):
-        check_camera(config, env_with(moved))
-    check_camera(AwdaConfig(trunk=LITE0), env_with(moved))  # free votes: no camera to check
+        check_camera(config, (k, moved))
+    check_camera(AwdaConfig(trunk=LITE0), (k, moved))  # free votes: no camera to check
 
 
 def test_the_demo_pointer_points_by_content_not_by_place() -> None:

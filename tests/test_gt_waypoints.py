@@ -13,7 +13,8 @@ from awda_bench.policies.random_policy import RandomPolicy
 
 def _ctx(seed: int, num_envs: int = 2) -> EpisodeContext:
     spec = EpisodeSpec(suite="pick_place", task=14, episode=0, seed=seed, demo_seed=seed + 1)
-    return EpisodeContext(env=SimpleNamespace(num_envs=num_envs), spec=spec)
+    observations = SimpleNamespace(num_envs=num_envs)  # all RandomPolicy reads
+    return EpisodeContext(env=None, spec=spec, observations=observations)  # type: ignore[arg-type]
 
 
 def test_random_policy_is_uniform_in_bounds_and_seeded_per_episode() -> None:

@@ -97,3 +97,32 @@ def test_missing_and_foreign_files_are_one_line_errors(tmp_path: Path) -> None:
     sqlite3.connect(other / STORE_NAME).execute("CREATE TABLE x (y)").connection.commit()
     with pytest.raises(CorruptFileError, match="not an awda_bench results store"):
         ResultsStore(other, create=True)
+
+
+def test_a_store_from_before_the_privileged_flag_reads_and_gains_it(
+    tmp_path: Path, protocol
+) -> None:
+    from awda_bench.harness import results_store
+
+    run_dir = tmp_path / "old"
+    run_dir.mkdir()
+    old_schema = results_store._SCHEMA.replace("    privileged INTEGER,\n", "")
+    assert old_schema != results_store._SCHEMA
+    with sqlite3.connect(run_dir / STORE_NAME) as db:
+        db.executescript(old_schema)
+        db.execute("INSERT INTO meta VALUES ('schema_version', ?)", (results_store.SCHEMA_VERSION,))
+        db.execute(
+            "INSERT INTO protocols VALUES (?, 'fake', 'Fake', ?)",
+            (protocol.fingerprint, protocol.to_json()),
+        )
+        db.execute(
+            "INSERT INTO snapshots VALUES (?, 'old', ?, ?, 0, 0, 8)",
+            (protocol.fingerprint, BUILTIN_SNAPSHOT, BUILTIN_SNAPSHOT),
+        )
+    with ResultsStore(run_dir, create=False) as store:  # the report reads it as it is
+        plan = store.snapshots()
+        assert plan["privileged"].isna().all()
+    with ResultsStore(run_dir, create=True) as store:  # a run adds the column
+        store.plan(protocol, "new", False, [SNAP], 8, "test", {}, privileged=True)
+        flags = dict(store.raw("SELECT method, privileged FROM snapshots"))
+    assert flags == {"old": None, "new": 1}

@@ -15,11 +15,10 @@ import numpy as np
 import pytest
 import torch
 
-from awda_bench.episode import EpisodeContext, EpisodeSpec
+from awda_bench.episode import EpisodeContext, EpisodeSpec, WristDepth
 from awda_bench.models.architectures import build_model
 from awda_bench.models.config import AwdaConfig, TosviConfig, TrunkConfig
 from awda_bench.models.snapshot import save_snapshot
-from awda_bench.robot.cameras import DepthFrame
 
 H, W = 64, 80
 
@@ -50,35 +49,40 @@ def depth_snapshot(tmp_path: Path) -> Path:
 
 
 class _Frames:
-    """Stands in for the harness cameras: a new random 120x160 frame (and a 64x80 wrist depth
-    image, nearest-resized by the policy) per capture."""
+    """Stands in for the episode's observations: the demo, and a new random 120x160 frame (and a
+    64x80 wrist depth image, nearest-resized by the policy) per capture."""
 
-    def __init__(self) -> None:
+    num_envs = 1
+
+    def __init__(self, demo: np.ndarray) -> None:
         self.rng = np.random.default_rng(0)
+        self.demo = demo
         self.shown: list[np.ndarray] = []
         self.depths: list[np.ndarray] = []
 
-    def __call__(self, env: object, uid: str = "third_person") -> np.ndarray:
+    def demo_frames(self, count: int = 10) -> np.ndarray:
+        assert count == len(self.demo)
+        return self.demo
+
+    def rgb(self) -> np.ndarray:
         frame = self.rng.integers(0, 256, (1, 120, 160, 3), dtype=np.uint8)
         self.shown.append(frame[0])
         return frame
 
-    def depth(self, env: object, uid: str = "wrist") -> DepthFrame:
+    def wrist_depth(self) -> WristDepth:
         depth = self.rng.uniform(0.05, 1.5, (1, 64, 80)).astype(np.float32)
         self.depths.append(depth[0, ::2, ::2])  # what nearest-resizing to 32x40 keeps
-        return DepthFrame(depth, np.eye(3), np.eye(4)[None])
+        return WristDepth(depth, np.eye(3)[None], np.eye(4)[None])
 
 
 def _policy(snapshot: Path, monkeypatch: pytest.MonkeyPatch, select: str):
     from awda_bench.policies.tosvi_policy import TosviPolicy
 
-    camera = _Frames()
-    monkeypatch.setattr("awda_bench.robot.cameras.capture_rgb", camera)
-    monkeypatch.setattr("awda_bench.robot.cameras.capture_wrist_depth", camera.depth)
-    policy = TosviPolicy(snapshot, select)
     demo = np.random.default_rng(1).integers(0, 256, (2, 120, 160, 3), dtype=np.uint8)
+    camera = _Frames(demo)
+    policy = TosviPolicy(snapshot, select)
     spec = EpisodeSpec(suite="pick_place", task=14, episode=0, seed=1, demo_seed=2)
-    policy.reset(EpisodeContext(env=object(), spec=spec, extras={"demo_frames": list(demo)}))
+    policy.reset(EpisodeContext(env=None, spec=spec, observations=camera))  # type: ignore[arg-type]
     return policy, camera, demo
 
 

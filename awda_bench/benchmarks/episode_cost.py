@@ -38,8 +38,12 @@ def _frames(env: Any) -> int:
     return 0 if counter is None else int(counter.frames)
 
 
-def _demo_frames(policy: Any) -> int:
-    return sum(_frames(e.unwrapped) for e in getattr(policy, "_demo_envs", {}).values())
+def _demo_frames() -> int:
+    """Frames rendered so far by this process's demonstrator envs (the harness's, shared by every
+    observation-only policy)."""
+    from awda_bench.harness.observations import DEMO_ENVS
+
+    return sum(_frames(e.unwrapped) for e in DEMO_ENVS.values())
 
 
 def measure(suite_name: str, method: str, checkpoints: Path | None, episodes: int) -> dict:
@@ -63,7 +67,7 @@ def measure(suite_name: str, method: str, checkpoints: Path | None, episodes: in
         for cached in (False, True):
             if not cached:
                 clear_demo_video_cache()
-            agent0, demo0 = _frames(env.unwrapped), _demo_frames(policy)
+            agent0, demo0 = _frames(env.unwrapped), _demo_frames()
             start = time.perf_counter()
             record = run_episode(env, policy, episode, suite, method=method, snapshot="bench")
             wall = time.perf_counter() - start
@@ -74,7 +78,7 @@ def measure(suite_name: str, method: str, checkpoints: Path | None, episodes: in
                     "wall_s": wall,
                     "steps": record.steps,
                     "agent_frames": _frames(env.unwrapped) - agent0,
-                    "demo_frames": _demo_frames(policy) - demo0,
+                    "demo_frames": _demo_frames() - demo0,
                     "inference_s": inference,
                     "success": bool(record.success_once),
                 }

@@ -3,8 +3,9 @@
 ::
 
     env.reset(seed=spec.seed, options={"task": spec.task, "reconfigure": True})     t = 0
-    policy.reset(ctx)
+    policy.reset(ctx)       ctx.env only for a privileged policy; else ctx.observations
     a_t = policy.act(obs_t); obs_{t+1}, info_{t+1} = env.step(a_t)   t = 0 .. T-1
+        obs_t: the env's state (privileged policy) or the episode's Observations
         stop after T = suite.horizon_steps steps, or once policy.done
     success_once   = any_t info_t["success"]      success_at_end = info_T["success"]
     reached/grasped = info_T["reached"/"grasped"] (the envs latch them), None if absent
@@ -28,8 +29,9 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.episode import EpisodeContext, EpisodeSpec, Policy
+from awda_bench.episode import EpisodeContext, EpisodeSpec, Policy, is_privileged
 from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
+from awda_bench.harness.observations import SimObservations
 from awda_bench.suites import Suite
 
 FrameHook = Callable[[Any], None]
@@ -85,8 +87,17 @@ def run_episode(
     if on_frame is not None:
         on_frame(env)
     t0 = time.perf_counter()
+    extras = {} if extras is None else extras
+    observations = SimObservations(env.unwrapped, spec, suite, extras)
+    privileged = is_privileged(policy)
     policy.reset(
-        EpisodeContext(env=env.unwrapped, spec=spec, extras={} if extras is None else extras)
+        EpisodeContext(
+            env=env.unwrapped if privileged else None,
+            spec=spec,
+            extras=extras,
+            observations=observations,
+            method=method,
+        )
     )
     act_time = time.perf_counter() - t0
 
@@ -95,9 +106,10 @@ def run_episode(
     steps = 0
     while steps < suite.horizon_steps and not policy.done:
         t0 = time.perf_counter()
-        action = policy.act(obs)
+        action = policy.act(obs if privileged else observations)
         t1 = time.perf_counter()
         obs, _reward, _terminated, _truncated, info = env.step(action)
+        observations.mark_stepped()
         env_time += time.perf_counter() - t1
         act_time += t1 - t0
         steps += 1

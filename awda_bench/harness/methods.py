@@ -6,6 +6,16 @@ non-learned method's target is called with no argument and counts as one snapsho
 (:data:`BUILTIN_SNAPSHOT`); a learned method's target is called with the snapshot file's path, and
 its snapshots are listed and checked with :mod:`awda_bench.models.snapshot` (or the method's own
 ``list_snapshots``/``load_snapshot`` targets).
+
+A method of your own is ``--method pkg.module:Factory`` (no registration): ``Factory()`` builds
+its policy. It is learned when ``Factory`` has the two public snapshot hooks (for instance as
+static methods of a policy class)::
+
+    Factory.list_snapshots(directory) -> list of snapshot paths, oldest first
+    Factory.load_snapshot(path)       -> anything; raises on a file it cannot use
+
+and is then evaluated per snapshot with ``--checkpoints DIR``: ``Factory(path)`` builds the
+policy of one snapshot, and each snapshot is keyed in the store by its content hash.
 """
 
 from __future__ import annotations
@@ -16,11 +26,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from awda_bench.episode import Policy
+from awda_bench.episode import Policy, is_privileged
 from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
 
 BUILTIN_SNAPSHOT = "builtin"
 """Snapshot hash recorded for non-learned methods."""
+
+SNAPSHOT_HOOKS = ("list_snapshots", "load_snapshot")
+"""The attributes that make an imported ``--method pkg.module:Factory`` a learned method."""
 
 DEFAULT_METHOD = "gt-waypoints"
 """Evaluated when ``run`` is given no ``--method``."""
@@ -42,6 +55,9 @@ class MethodSpec:
     """``"module:attribute"`` of ``load_snapshot(path)``, raising on a corrupt file."""
     description: str = ""
     """One line for ``--help``."""
+    privileged: bool = False
+    """The policy reads the simulator (its ``privileged`` class attribute, which
+    :func:`make_policy` checks against this); its rows are marked in the tables."""
 
 
 @dataclass(frozen=True)
@@ -79,22 +95,48 @@ def get_method(name: str) -> MethodSpec:
     if name in _REGISTRY:
         return _REGISTRY[name]
     if ":" in name:
-        resolve(name, what=f"method {name!r}")
-        return MethodSpec(name=name, target=name, description="imported policy")
+        factory = resolve(name, what=f"method {name!r}")
+        hooks = [hasattr(factory, hook) for hook in SNAPSHOT_HOOKS]
+        if any(hooks) and not all(hooks):
+            raise UsageError(
+                f"method {name!r} has only one of {' and '.join(SNAPSHOT_HOOKS)}; a learned "
+                "method needs both, a non-learned one neither"
+            )
+        if all(hooks):
+            return MethodSpec(
+                name=name,
+                target=name,
+                learned=True,
+                privileged=is_privileged(factory),
+                list_snapshots=f"{name}.{SNAPSHOT_HOOKS[0]}",
+                load_snapshot=f"{name}.{SNAPSHOT_HOOKS[1]}",
+                description="imported learned policy",
+            )
+        return MethodSpec(
+            name=name,
+            target=name,
+            description="imported policy",
+            privileged=is_privileged(factory),
+        )
     raise UnknownChoiceError("method", name, [*method_names(), "module:attribute"])
 
 
 def resolve(target: str, *, what: str) -> Any:
-    """Import ``"module:attribute"``; a missing module or attribute is a one-line usage error."""
+    """Import ``"module:attribute"`` (the attribute may be dotted: ``"module:Class.method"``); a
+    missing module or attribute is a one-line usage error."""
     module_name, _, attribute = target.partition(":")
     try:
-        module = importlib.import_module(module_name)
+        found: Any = importlib.import_module(module_name)
     except ModuleNotFoundError as exc:
         raise UsageError(f"{what} is not available: cannot import {module_name} ({exc})") from exc
-    try:
-        return getattr(module, attribute)
-    except AttributeError as exc:
-        raise UsageError(f"{what} is not available: {module_name} has no {attribute!r}") from exc
+    for part in attribute.split("."):
+        try:
+            found = getattr(found, part)
+        except AttributeError as exc:
+            raise UsageError(
+                f"{what} is not available: {module_name} has no {attribute!r}"
+            ) from exc
+    return found
 
 
 def make_policy(spec: MethodSpec, snapshot: SnapshotRef) -> Policy:
@@ -103,6 +145,11 @@ def make_policy(spec: MethodSpec, snapshot: SnapshotRef) -> Policy:
     policy = factory(snapshot.path) if spec.learned else factory()
     if not isinstance(policy, Policy):
         raise UsageError(f"method {spec.name!r}: {spec.target} did not return a Policy")
+    if is_privileged(policy) != spec.privileged:
+        raise UsageError(
+            f"method {spec.name!r}: its policy declares privileged = {is_privileged(policy)} "
+            f"but the method is registered with privileged = {spec.privileged}; make them agree"
+        )
     return policy
 
 
@@ -160,21 +207,25 @@ for _spec in (
     MethodSpec(
         "gt-waypoints",
         "awda_bench.policies.gt_waypoints:GTWaypointsPolicy",
+        privileged=True,
         description="privileged: ground-truth attributed waypoints executed by the primitives",
     ),
     MethodSpec(
         "gt-waypoints-k3",
         "awda_bench.policies.gt_waypoints:gt_waypoints_k3",
+        privileged=True,
         description="gt-waypoints with K = 3 waypoints (--num-waypoints 3)",
     ),
     MethodSpec(
         "gt-waypoints-k8",
         "awda_bench.policies.gt_waypoints:gt_waypoints_k8",
+        privileged=True,
         description="gt-waypoints with K = 8 waypoints (--num-waypoints 8)",
     ),
     MethodSpec(
         "scripted",
         "awda_bench.policies.scripted:ScriptedPolicy",
+        privileged=True,
         description="privileged: scripted expert",
     ),
     MethodSpec(
@@ -186,6 +237,7 @@ for _spec in (
     MethodSpec(
         "gt-waypoints-centre",
         "awda_bench.policies.gt_waypoints:gt_waypoints_centre",
+        privileged=True,
         description="gt-waypoints, grasps take the depth component nearest the image centre "
         "(the reference's rule; --grasp-select centre)",
     ),

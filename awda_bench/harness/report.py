@@ -166,10 +166,12 @@ def write_report(
 
     suite_of = protocols.set_index("fingerprint")["suite"]
     display = dict(zip(protocols["suite"], protocols["display_name"], strict=True))
+    privileged = set(snapshots.loc[snapshots["privileged"].fillna(0).astype(int) == 1, "method"])
+    marked = tables.mark_privileged(cells, privileged)
     sections: list[tuple[str, str, pd.DataFrame]] = [
-        ("s3", "Table S3: success per suite (held-out tasks)", tables.table_s3(cells, display)),
+        ("s3", "Table S3: success per suite (held-out tasks)", tables.table_s3(marked, display)),
     ]
-    s4 = tables.table_s4(cells)
+    s4 = tables.table_s4(marked)
     if s4 is not None:
         sections.append(("s4", "Table S4: success per family", s4))
     snap_table = per_snap.assign(suite=per_snap["protocol"].map(suite_of))[

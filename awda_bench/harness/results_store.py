@@ -4,7 +4,8 @@ Tables::
 
     meta(key, value)                       schema version
     protocols(fingerprint, suite, display_name, definition)   one protocol per suite per store
-    snapshots(protocol, method, snapshot, name, ord, learned, episodes_expected)   the plan
+    snapshots(protocol, method, snapshot, name, ord, learned, episodes_expected, privileged)
+                                                                                   the plan
     episodes(protocol, method, snapshot, task, episode, ...)   PRIMARY KEY of those five
     runs(id, started_at, command, versions)
 
@@ -53,6 +54,7 @@ CREATE TABLE IF NOT EXISTS snapshots (
     ord INTEGER NOT NULL,
     learned INTEGER NOT NULL,
     episodes_expected INTEGER NOT NULL,
+    privileged INTEGER,
     PRIMARY KEY (protocol, method, snapshot)
 );
 CREATE TABLE IF NOT EXISTS episodes (
@@ -160,6 +162,7 @@ class ResultsStore:
                     "use another run directory"
                 )
             if create:
+                self._add_privileged_column()
                 self._conn.execute("PRAGMA journal_mode=WAL")
                 # WAL + NORMAL: a commit survives the process being killed (only an OS crash or
                 # power loss can drop the last commits); no fsync per episode
@@ -172,6 +175,13 @@ class ResultsStore:
         with self._conn:
             self._conn.executescript(_SCHEMA)
             self._conn.execute("INSERT INTO meta VALUES ('schema_version', ?)", (SCHEMA_VERSION,))
+
+    def _add_privileged_column(self) -> None:
+        """A store written before methods declared privilege gains the column (NULL: unknown)."""
+        columns = {r[1] for r in self._conn.execute("PRAGMA table_info(snapshots)")}
+        if "privileged" not in columns:
+            with self._conn:
+                self._conn.execute("ALTER TABLE snapshots ADD COLUMN privileged INTEGER")
 
     def close(self) -> None:
         self._conn.close()
@@ -212,8 +222,10 @@ class ResultsStore:
         command: str,
         versions: dict[str, str],
         display_name: str = "",
+        privileged: bool = False,
     ) -> None:
-        """Record the protocol, the snapshots about to be evaluated and this run's invocation."""
+        """Record the protocol, the snapshots about to be evaluated and this run's invocation;
+        ``privileged``: the method reads the simulator (its rows are marked in the tables)."""
         self.check_protocol(protocol)
         with self._conn:
             self._conn.execute(
@@ -227,7 +239,8 @@ class ResultsStore:
             )
             for snap in snapshots:
                 self._conn.execute(
-                    "INSERT OR REPLACE INTO snapshots VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    "INSERT OR REPLACE INTO snapshots (protocol, method, snapshot, name, ord, "
+                    "learned, episodes_expected, privileged) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
                     (
                         protocol.fingerprint,
                         method,
@@ -236,6 +249,7 @@ class ResultsStore:
                         snap.order,
                         int(learned),
                         episodes_expected,
+                        int(privileged),
                     ),
                 )
             self._conn.execute(
@@ -306,9 +320,13 @@ class ResultsStore:
         )
 
     def snapshots(self) -> pd.DataFrame:
-        return pd.read_sql_query(
+        """The plan; ``privileged`` is NULL (unknown) in a store written before it existed."""
+        plan = pd.read_sql_query(
             "SELECT * FROM snapshots ORDER BY protocol, method, ord", self._conn
         )
+        if "privileged" not in plan.columns:
+            plan["privileged"] = None
+        return plan
 
     def protocols(self) -> pd.DataFrame:
         return pd.read_sql_query("SELECT * FROM protocols ORDER BY suite", self._conn)

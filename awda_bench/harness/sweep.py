@@ -243,6 +243,7 @@ def run_sweep(config: SweepConfig) -> SweepResult:
             config.command,
             software_versions(),
             plan.suite.display_name,
+            plan.method.privileged,
         )
         finished = {
             snap.sha256: store.finished_keys(fingerprint, plan.method.name, snap.sha256)

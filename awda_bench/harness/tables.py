@@ -1,11 +1,13 @@
 """Report tables as DataFrames of strings, and their Markdown / CSV / LaTeX renderings.
 
 Cells read ``"mean ± SE"`` with two decimals; a dagger marks an SE that is binomial over the
-episodes of a single snapshot (instead of across snapshots).
+episodes of a single snapshot (instead of across snapshots). Methods that read the simulator are
+named with :data:`PRIVILEGED_MARK`.
 """
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import pandas as pd
@@ -14,6 +16,17 @@ from awda_bench.harness.aggregate import ALL, S4_FAMILIES, Cell
 
 BINOMIAL_MARK = "†"
 """Suffix of a cell whose SE is binomial over episodes (one snapshot)."""
+
+PRIVILEGED_MARK = " (privileged)"
+"""Suffix of a method that reads the simulator (an upper bound, not a comparable method)."""
+
+
+def mark_privileged(cells: list[Cell], privileged: set[str]) -> list[Cell]:
+    """``cells`` with :data:`PRIVILEGED_MARK` after the names of the ``privileged`` methods."""
+    return [
+        replace(c, method=c.method + PRIVILEGED_MARK) if c.method in privileged else c
+        for c in cells
+    ]
 
 
 def format_cell(cell: Cell | None) -> str:

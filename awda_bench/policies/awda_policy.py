@@ -22,11 +22,11 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.episode import EpisodeContext
+from awda_bench.episode import EpisodeContext, Observations, observations_of
 from awda_bench.errors import CorruptFileError, UsageError
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig
-from awda_bench.policies.gt_waypoints import robot_states
+from awda_bench.primitives.base import RobotState
 from awda_bench.primitives.config import CENTRE_SUFFIX, ExecutorConfig, LocalizationConfig
 from awda_bench.primitives.executor import WaypointExecutor
 from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION, WristLocator
@@ -60,14 +60,12 @@ def _resize(frames: np.ndarray, height: int, width: int) -> np.ndarray:
     return np.stack([cv2.resize(f, (width, height), interpolation=cv2.INTER_AREA) for f in frames])
 
 
-def check_camera(config: AwdaConfig, env: Any) -> None:
+def check_camera(config: AwdaConfig, camera: tuple[np.ndarray, np.ndarray]) -> None:
     """A network whose waypoints are votes on its training camera's rays (a cell head with a
-    camera) refuses a scene whose third-person camera is another one."""
+    camera) refuses a scene whose third-person ``camera`` (intrinsics, extrinsics) is another one."""
     if not config.camera_intrinsic:
         return
-    from awda_bench.robot.cameras import camera_params
-
-    intrinsic, extrinsic = camera_params(env)
+    intrinsic, extrinsic = camera
     want_k = np.asarray(config.camera_intrinsic).reshape(3, 3)
     want_e = np.asarray(config.camera_extrinsic).reshape(3, 4)
     if not (
@@ -104,30 +102,20 @@ class AWDAPolicy:
         trunk = model.config.trunk
         self.image_size = (trunk.image_height_px, trunk.image_width_px)
         self.demo_frames = trunk.demo_frames
-        self._demo_envs: dict[tuple[str, str], Any] = {}
-        self._env: Any = None
+        self._observations: Observations | None = None
         self._executor: WaypointExecutor | None = None
         self._waypoints: np.ndarray | None = None
         self.predict_s = 0.0
         """Wall time of the last forward pass [s]."""
 
     def reset(self, ctx: EpisodeContext) -> None:
-        from awda_bench.demo_recording import demo_video_frames
         from awda_bench.models.predict import predict_waypoints
-        from awda_bench.robot.cameras import capture_rgb
-        from awda_bench.suites import load_suite
 
-        self._env = ctx.env
-        suite = load_suite(ctx.spec.suite)
-        demo = ctx.extras.get("demo_frames")
-        if demo is None:
-            demo = demo_video_frames(
-                suite, ctx.spec.task, ctx.spec.demo_seed, self._demo_envs, self.demo_frames
-            )
-            ctx.extras["demo_frames"] = list(demo)
-        check_camera(self.model.config, ctx.env)
-        first = capture_rgb(ctx.env)[0]
-        ctx.extras.setdefault("first_frame", first)
+        observations = observations_of(ctx)
+        self._observations = observations
+        demo = observations.demo_frames(self.demo_frames)
+        check_camera(self.model.config, observations.camera())
+        first = observations.first_frame()
         h, w = self.image_size
         start = time.perf_counter()
         predicted = predict_waypoints(
@@ -140,13 +128,21 @@ class AWDAPolicy:
         waypoints = predicted.copy()
         waypoints[:, 3:] = (predicted[:, 3:] > self.config.attribute_threshold).astype(np.float64)
         self._waypoints = waypoints
-        locator = WristLocator(ctx.env, env_index=0, config=self.config.localization)
+        locator = WristLocator(
+            None,
+            env_index=0,
+            config=self.config.localization,
+            capture=lambda _env: observations.wrist_depth(),
+        )
         self._executor = WaypointExecutor(waypoints, locator, self.config.executor)
 
     def act(self, obs: Any) -> np.ndarray:
-        if self._executor is None:
+        if self._executor is None or self._observations is None:
             raise RuntimeError("AWDAPolicy.act() before reset(ctx)")
-        state = robot_states(self._env)[0]
+        proprio = self._observations.proprio()
+        state = RobotState(
+            tcp_pos=proprio.tcp_pos[0], gripper_opening_m=float(proprio.gripper_opening_m[0])
+        )
         return self._executor.step(state)[None].astype(np.float32)
 
     @property

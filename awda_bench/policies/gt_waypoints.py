@@ -159,6 +159,8 @@ class GTWaypointsPolicy:
     """Plans with the suite's scripted expert on the scene itself, then executes K waypoints."""
 
     name = "gt-waypoints"
+    privileged = True
+    """It plans on the simulator (``ctx.env``): its rows are marked privileged."""
 
     def __init__(self, config: GTWaypointsConfig | None = None) -> None:
         self.config = config or GTWaypointsConfig()

@@ -20,7 +20,7 @@ class RandomPolicy:
 
     def reset(self, ctx: EpisodeContext) -> None:
         self._rng = np.random.default_rng(ctx.spec.seed)
-        self._num_envs = int(getattr(ctx.env, "num_envs", 1))
+        self._num_envs = 1 if ctx.observations is None else ctx.observations.num_envs
 
     def act(self, obs: Any) -> np.ndarray:
         return self._rng.uniform(-1.0, 1.0, size=(self._num_envs, 4)).astype(np.float32)

@@ -13,6 +13,8 @@ class ScriptedPolicy:
     """Thin wrapper: builds the agent-embodiment expert of the episode's suite at each reset."""
 
     name = "scripted"
+    privileged = True
+    """It reads the simulator (``ctx.env``): its rows are marked privileged."""
 
     def __init__(self) -> None:
         self._expert: Policy | None = None

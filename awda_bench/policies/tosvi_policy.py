@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.episode import EpisodeContext
+from awda_bench.episode import EpisodeContext, Observations, observations_of
 from awda_bench.errors import CorruptFileError, UnknownChoiceError
 
 ACTION_SELECTS: tuple[str, ...] = ("sample", "mean", "mode")
@@ -97,8 +97,7 @@ class TosviPolicy:
         self.depth_size = (cfg.depth_height_px, cfg.depth_width_px)
         self.use_depth = cfg.use_depth
         self.frame_stack = cfg.frame_stack
-        self._demo_envs: dict[tuple[str, str], Any] = {}
-        self._env: Any = None
+        self._observations: Observations | None = None
         self._demo_features: Any = None
         self._frames: deque[Any] = deque(maxlen=self.frame_stack)
         self._depths: deque[Any] = deque(maxlen=self.frame_stack)
@@ -118,21 +117,9 @@ class TosviPolicy:
     def reset(self, ctx: EpisodeContext) -> None:
         import torch
 
-        from awda_bench.demo_recording import demo_video_frames
-        from awda_bench.suites import load_suite
-
-        self._env = ctx.env
-        demo = ctx.extras.get("demo_frames")
-        if demo is None:
-            suite = load_suite(ctx.spec.suite)
-            demo = demo_video_frames(
-                suite,
-                ctx.spec.task,
-                ctx.spec.demo_seed,
-                self._demo_envs,
-                self.model.config.trunk.demo_frames,
-            )
-            ctx.extras["demo_frames"] = list(demo)
+        observations = observations_of(ctx)
+        self._observations = observations
+        demo = observations.demo_frames(self.model.config.trunk.demo_frames)
         start = time.perf_counter()
         with torch.no_grad():
             self._demo_features = self.model.trunk.frame_features(self._to_tensor(np.asarray(demo)))
@@ -145,13 +132,12 @@ class TosviPolicy:
         """Render o_t (and d_t), encode it, push it on the stacks (padding the first one)."""
         import torch
 
-        from awda_bench.robot.cameras import capture_rgb, capture_wrist_depth
-
-        rgb = capture_rgb(self._env)[0]
+        assert self._observations is not None
+        rgb = self._observations.rgb()[0]
         depth_m = None
         if self.use_depth:
             h, w = self.depth_size
-            depth_m = _resize(capture_wrist_depth(self._env).depth_m[0], h, w, nearest=True)
+            depth_m = _resize(self._observations.wrist_depth().depth_m[0], h, w, nearest=True)
         start = time.perf_counter()
         with torch.no_grad():
             features = self.model.trunk.frame_features(self._to_tensor(rgb[None]))[:, 0]
