@@ -303,14 +303,16 @@ def test_the_demo_pointer_points_by_content_not_by_place() -> None:
     """Moving everything the demo and o_1 show by a few cells moves every waypoint's score over
     o_1's cells by the same cells: the head has no absolute position to memorize scenes by
     (``demo-to-scene``, which has, does not pass this)."""
+    from awda_bench.models.cell_readout import CellHeadShape
     from awda_bench.models.demo_pointer import DemoPointer
 
     torch.manual_seed(0)
     grid, dy, dx = (12, 16), 2, 3
-    head = DemoPointer(
-        channels=8, grid=grid, demo_frames=4, dim=16, queries=2, dropout=0.0, hidden=32,
+    shape = CellHeadShape(
+        channels=8, grid=grid, demo_frames=4, dim=16, dropout=0.0, hidden=32,
         waypoints=5, waypoint_dim=4, num_heads=2,
-    ).eval()  # fmt: skip
+    )  # fmt: skip
+    head = DemoPointer(shape, queries=2).eval()
     demo = torch.zeros(1, 4, 8, *grid)
     first = torch.zeros(1, 8, *grid)
     # content in the middle, empty cells around it
@@ -332,13 +334,15 @@ def test_the_demo_pointer_identifies_the_object_before_it_is_placed() -> None:
     """What the demonstrator moved is read from the demo's first half only: where it put the object
     (the second half) cannot select which object to grasp (held-out tasks pair an object with a
     compartment training never pairs it with)."""
+    from awda_bench.models.cell_readout import CellHeadShape
     from awda_bench.models.demo_pointer import DemoPointer
 
     torch.manual_seed(0)
-    head = DemoPointer(
-        channels=8, grid=(6, 8), demo_frames=10, dim=16, queries=2, dropout=0.0, hidden=32,
+    shape = CellHeadShape(
+        channels=8, grid=(6, 8), demo_frames=10, dim=16, dropout=0.0, hidden=32,
         waypoints=5, waypoint_dim=4, num_heads=2,
-    ).eval()  # fmt: skip
+    )  # fmt: skip
+    head = DemoPointer(shape, queries=2).eval()
     demo, first = torch.randn(1, 10, 8, 6, 8), torch.randn(1, 8, 6, 8)
     placed_elsewhere = demo.clone()
     placed_elsewhere[:, 5:] = torch.randn(1, 5, 8, 6, 8)

@@ -19,12 +19,13 @@ in; this project's datasets use the ManiSkill **world frame, metres**, TCP posit
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import torch
 from torch import nn
 
 from awda_bench.errors import UsageError
+from awda_bench.models.cell_readout import CellHeadShape
 from awda_bench.models.config import CELL_HEADS, AwdaConfig
 from awda_bench.models.demo_pointer import DemoPointer
 from awda_bench.models.demo_to_scene import DemoToScene
@@ -61,26 +62,26 @@ class AwdaNet(nn.Module):
         trunk = config.trunk
         self.scene_head: DemoToScene | DemoPointer | None = None
         if trunk.head in CELL_HEADS:
-            cell_head: dict[str, Any] = {
-                "channels": self.trunk.channels,
-                "grid": feature_map_size(trunk, trunk.image_height_px, trunk.image_width_px),
-                "demo_frames": trunk.demo_frames,
-                "dim": trunk.attention_heads * trunk.attention_head_dim,
-                "dropout": trunk.dropout,
-                "hidden": config.head_hidden_dim,
-                "waypoints": config.total_waypoints,
-                "waypoint_dim": config.waypoint_dim,
-                "num_heads": config.num_heads,
-                "camera": _camera(config),
-            }
+            shape = CellHeadShape(
+                channels=self.trunk.channels,
+                grid=feature_map_size(trunk, trunk.image_height_px, trunk.image_width_px),
+                demo_frames=trunk.demo_frames,
+                dim=trunk.attention_heads * trunk.attention_head_dim,
+                dropout=trunk.dropout,
+                hidden=config.head_hidden_dim,
+                waypoints=config.total_waypoints,
+                waypoint_dim=config.waypoint_dim,
+                num_heads=config.num_heads,
+                camera=_camera(config),
+            )
             if trunk.head == "demo-pointer":
-                self.scene_head = DemoPointer(queries=trunk.attention_heads, **cell_head)
+                self.scene_head = DemoPointer(shape, queries=trunk.attention_heads)
             else:
                 self.scene_head = DemoToScene(
+                    shape,
                     heads=trunk.attention_heads,
                     layers=trunk.attention_layers,
                     demo_reference=config.demo_reference_frame,
-                    **cell_head,
                 )
             return
         out = config.total_waypoints * config.waypoint_dim

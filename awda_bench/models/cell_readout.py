@@ -21,6 +21,8 @@ coordinates and mapped them to the world with the camera matrix.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 from torch import nn
 
@@ -56,21 +58,38 @@ def cell_rays(
     return -rotation.T @ translation, directions
 
 
+@dataclass(frozen=True)
+class CellHeadShape:
+    """What every cell head (and its readout) is built from."""
+
+    channels: int
+    """Channels of the backbone's feature map."""
+    grid: tuple[int, int]
+    """``(h, w)`` cells of the feature map."""
+    demo_frames: int
+    dim: int
+    """Token width ``d``."""
+    dropout: float
+    hidden: int
+    """Hidden width of the heads' MLPs."""
+    waypoints: int
+    """N, all sets together (15)."""
+    waypoint_dim: int
+    """3 + k."""
+    num_heads: int
+    """Waypoint heads (task-driven, synthesized)."""
+    camera: Camera | None = None
+    """The agent camera, for ray votes; ``None``: free xyz votes."""
+
+
 class CellReadout(nn.Module):
     """``(tokens (B, h*w, d), head (B,))`` -> waypoints ``(B, N, 3 + k)`` (module docstring)."""
 
-    def __init__(
-        self,
-        dim: int,
-        grid: tuple[int, int],
-        hidden: int,
-        waypoints: int,
-        waypoint_dim: int,
-        num_heads: int,
-        camera: Camera | None = None,
-    ) -> None:
+    def __init__(self, shape: CellHeadShape) -> None:
         super().__init__()
-        h, w = grid
+        dim, hidden, camera = shape.dim, shape.hidden, shape.camera
+        waypoints, waypoint_dim, num_heads = shape.waypoints, shape.waypoint_dim, shape.num_heads
+        h, w = grid = shape.grid
         self.waypoints, self.waypoint_dim, self.num_heads = waypoints, waypoint_dim, num_heads
         ys, xs = torch.meshgrid(
             torch.linspace(-1.0, 1.0, h), torch.linspace(-1.0, 1.0, w), indexing="ij"

@@ -48,7 +48,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from awda_bench.models.cell_readout import Camera, CellReadout
+from awda_bench.models.cell_readout import CellHeadShape, CellReadout
 
 
 def _mlp(inputs: int, hidden: int, outputs: int, dropout: float) -> nn.Sequential:
@@ -60,23 +60,11 @@ def _mlp(inputs: int, hidden: int, outputs: int, dropout: float) -> nn.Sequentia
 class DemoPointer(nn.Module):
     """``(demo (B, Td, C, h, w), o_1 (B, C, h, w), head (B,))`` -> waypoints ``(B, N, 3 + k)``."""
 
-    def __init__(
-        self,
-        channels: int,
-        grid: tuple[int, int],
-        demo_frames: int,
-        dim: int,
-        queries: int,
-        dropout: float,
-        hidden: int,
-        waypoints: int,
-        waypoint_dim: int,
-        num_heads: int,
-        camera: Camera | None = None,
-    ) -> None:
-        """``queries``: softmaxes over the demo's cells that pick what moved (module docstring);
-        ``camera``: ``(intrinsic 3x3, extrinsic 3x4, (height, width))`` for ray votes."""
+    def __init__(self, shape: CellHeadShape, queries: int) -> None:
+        """``queries``: softmaxes over the demo's cells that pick what moved (module docstring)."""
         super().__init__()
+        channels, grid, demo_frames = shape.channels, shape.grid, shape.demo_frames
+        dim, hidden, dropout = shape.dim, shape.hidden, shape.dropout
         self.grid = grid
         self.embed = nn.Sequential(
             nn.Conv2d(channels, dim, kernel_size=1), nn.GELU(), nn.Conv2d(dim, dim, kernel_size=1)
@@ -90,7 +78,7 @@ class DemoPointer(nn.Module):
         self.place_cell = _mlp(2 * dim, hidden, dim, dropout)
         self.context = nn.Conv2d(dim, dim, kernel_size=3, padding=1)
         self.norm = nn.LayerNorm(dim)
-        self.readout = CellReadout(dim, grid, hidden, waypoints, waypoint_dim, num_heads, camera)
+        self.readout = CellReadout(shape)
 
     def what_moved(self, per_cell: torch.Tensor) -> torch.Tensor:
         """``g`` ``(B, d)`` from the demo's embedded cells ``(B, L, Td, d)``: what stood where

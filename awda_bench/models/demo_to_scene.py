@@ -34,7 +34,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from awda_bench.models.cell_readout import Camera, CellReadout
+from awda_bench.models.cell_readout import CellHeadShape, CellReadout
 
 
 class _Layer(nn.Module):
@@ -64,35 +64,22 @@ class DemoToScene(nn.Module):
     """``(demo (B, Td, C, h, w), o_1 (B, C, h, w), head (B,))`` -> waypoints ``(B, N, 3 + k)``."""
 
     def __init__(
-        self,
-        channels: int,
-        grid: tuple[int, int],
-        demo_frames: int,
-        dim: int,
-        heads: int,
-        layers: int,
-        dropout: float,
-        hidden: int,
-        waypoints: int,
-        waypoint_dim: int,
-        num_heads: int,
-        camera: Camera | None = None,
-        demo_reference: bool = False,
+        self, shape: CellHeadShape, heads: int, layers: int, demo_reference: bool = False
     ) -> None:
-        """``camera``: ``(intrinsic 3x3, extrinsic 3x4, (height, width))`` of the agent camera, for
-        ray votes (module docstring)."""
+        """``heads`` x ``layers`` attention; ``demo_reference``: module docstring."""
         super().__init__()
-        h, w = grid
+        channels, dim, dropout = shape.channels, shape.dim, shape.dropout
+        h, w = shape.grid
         self.project = nn.Conv2d(channels, dim, kernel_size=1)
         self.demo_reference = demo_reference
         if demo_reference:
             self.project_reference = nn.Conv2d(channels, dim, kernel_size=1, bias=False)
         self.position = nn.Parameter(torch.randn(dim, h, w) * 0.02)
-        self.time = nn.Parameter(torch.randn(demo_frames, dim) * 0.02)
+        self.time = nn.Parameter(torch.randn(shape.demo_frames, dim) * 0.02)
         self.demo_pool = nn.AvgPool2d(2, ceil_mode=True)
         self.layers = nn.ModuleList(_Layer(dim, heads, dropout) for _ in range(layers))
         self.norm = nn.LayerNorm(dim)
-        self.readout = CellReadout(dim, grid, hidden, waypoints, waypoint_dim, num_heads, camera)
+        self.readout = CellReadout(shape)
 
     def tokens(self, demo: torch.Tensor, first: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Demo tokens ``(B, Td*h'*w', d)`` and o_1 tokens ``(B, h*w, d)``."""
