@@ -10,6 +10,8 @@
                                               spaced in time over states 0..T_a (linear), plus
                                               the k mined attributes (nearest step, 0/1);
                                               trajectory[0] is the TCP at the first frame
+        "demo_trajectory" (P, 3 + k)          the same of d (its grasp labels the identification
+                                              loss, :mod:`awda_bench.models.identification_loss`)
         "head"        ()  int64               0
     synthesized (head 1): each synthesized episode paired with itself (demo = its own frames)
 
@@ -303,7 +305,8 @@ class AwdaPairDataset:
         return len(self.pairs)
 
     def trajectory(self, agent: EpisodeRef) -> np.ndarray:
-        """The ``"trajectory"`` label of an agent (or synthesized) episode ``(P, 3 + k)``."""
+        """The ``"trajectory"`` label of an episode ``(P, 3 + k)`` (``"demo_trajectory"`` of a
+        demonstrator's)."""
         return resample_trajectory(
             self.data.tcp_pos(agent),
             self.data.attributes(agent, self.attributes),
@@ -318,6 +321,7 @@ class AwdaPairDataset:
             "demo": frames_tensor(self.data.frames(demo, demo_idx), self.image_size),
             "first_frame": frames_tensor(self.data.frames(agent, [0]), self.image_size)[0],
             "trajectory": torch.from_numpy(trajectory),
+            "demo_trajectory": torch.from_numpy(self.trajectory(demo)),
             "head": torch.tensor(head, dtype=torch.int64),
         }
 

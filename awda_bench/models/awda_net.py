@@ -7,6 +7,9 @@ Batch format (what a dataset's samples stack into; images RGB float in [0, 1], c
     "trajectory":  (B, T, 3 + k)   ground truth: TCP xyz [m] + k attribute flags in [0, 1];
                                    trajectory[:, 0] is the TCP at o_1 (polylines start there)
     "head":        (B,) int64      0 = task-driven sample, 1 = synthesized (trajectory synthesis)
+    "demo_trajectory": (B, T, 3 + k)  the demo's own TCP path and attributes, as "trajectory";
+                                   read only by the identification loss (``demo-pointer`` with
+                                   ``identification_weight > 0``)
 
 With a frozen backbone, training batches carry its cached feature maps instead of the images:
 ``"demo_features" (B, demo_frames, C, h, w)`` and ``"first_frame_features" (B, C, h, w)``.
@@ -27,9 +30,10 @@ from torch import nn
 from awda_bench.errors import UsageError
 from awda_bench.models.cell_readout import CellHeadShape
 from awda_bench.models.config import CELL_HEADS, AwdaConfig
-from awda_bench.models.demo_pointer import DemoPointer
+from awda_bench.models.demo_pointer import DemoPointer, PointerOutput
 from awda_bench.models.demo_to_scene import DemoToScene
 from awda_bench.models.frame_encoder import feature_map_size
+from awda_bench.models.identification_loss import identification_loss
 from awda_bench.models.trunk import VisualTrunk
 from awda_bench.models.waypoint_loss import multi_waypoint_sdtw_loss, split_waypoint_sets
 
@@ -74,8 +78,9 @@ class AwdaNet(nn.Module):
                 num_heads=config.num_heads,
                 camera=_camera(config),
             )
+            self.grid = shape.grid
             if trunk.head == "demo-pointer":
-                self.scene_head = DemoPointer(shape, queries=trunk.attention_heads)
+                self.scene_head = DemoPointer(shape)
             else:
                 self.scene_head = DemoToScene(
                     shape,
@@ -140,7 +145,17 @@ class AwdaNet(nn.Module):
     ) -> tuple[torch.Tensor, dict[str, float]]:
         """The multi-waypoint Soft-DTW loss of a batch (format in the module docstring)."""
         cfg = self.config
-        if "demo_features" in batch:  # a frozen backbone's cached features
+        pointed: PointerOutput | None = None
+        if cfg.identification_weight > 0.0 and isinstance(self.scene_head, DemoPointer):
+            if "demo_features" in batch:
+                demo, first = batch["demo_features"], batch["first_frame_features"]
+            else:
+                frames = torch.cat((batch["demo"], batch["first_frame"].unsqueeze(1)), dim=1)
+                features = self.trunk.frame_features(frames)
+                demo, first = features[:, :-1], features[:, -1]
+            pointed = self.scene_head.pointer(demo, first, batch["head"].long())
+            waypoints = pointed.waypoints
+        elif "demo_features" in batch:  # a frozen backbone's cached features
             waypoints = self.forward_features(
                 batch["demo_features"], batch["first_frame_features"], batch["head"]
             )
@@ -154,9 +169,21 @@ class AwdaNet(nn.Module):
             gamma=cfg.gamma,
             attribute_scale=cfg.attribute_scale,
         )
-        info = {"loss": float(loss.detach())}
-        info.update({f"sdtw_set{j + 1}": float(v) for j, v in enumerate(per_set.detach())})
-        return loss, info
+        info = {f"sdtw_set{j + 1}": float(v) for j, v in enumerate(per_set.detach())}
+        if pointed is not None:
+            camera = _camera(cfg)
+            assert camera is not None  # AwdaConfig checks it
+            found, found_info = identification_loss(
+                pointed.moved_logits,
+                pointed.object_logits,
+                batch["demo_trajectory"],
+                batch["trajectory"],
+                camera,
+                self.grid,
+            )
+            loss = loss + cfg.identification_weight * found
+            info.update(found_info)
+        return loss, {"loss": float(loss.detach()), **info}
 
     def waypoint_sets(self, waypoints: torch.Tensor) -> list[torch.Tensor]:
         """Split raw output ``(B, 15, 3 + k)`` into sets of 1..5 waypoints."""

@@ -5,7 +5,7 @@ Shared by the heads that end in a choice of o_1 cells (:mod:`awda_bench.models.d
 :mod:`awda_bench.models.demo_pointer`). One sample, tokens ``x`` ``(L, d)`` of o_1's ``L = h*w``
 cells, per waypoint head::
 
-    p_j = softmax over cells of  w_j . x(cell)                       (where waypoint j is)
+    p_j = softmax over cells of  w_j . x(cell) [+ a_j prior(cell)]   (where waypoint j is)
     v_j(cell) = MLP_j([x(cell), cell x, y])  read as an attributed point (3 + k):
         with a camera:  the point at height z_j + dz(cell) on the camera ray through the cell's
                         centre, moved by (dx, dy); |dz|, |dx|, |dy| <= 5 cm; z_j a parameter per
@@ -85,7 +85,9 @@ class CellHeadShape:
 class CellReadout(nn.Module):
     """``(tokens (B, h*w, d), head (B,))`` -> waypoints ``(B, N, 3 + k)`` (module docstring)."""
 
-    def __init__(self, shape: CellHeadShape) -> None:
+    def __init__(self, shape: CellHeadShape, prior: bool = False) -> None:
+        """``prior``: ``forward`` takes a logit per cell that every waypoint adds to its own,
+        scaled by a weight ``a_j`` learned per head and waypoint, starting at 0."""
         super().__init__()
         dim, hidden, camera = shape.dim, shape.hidden, shape.camera
         waypoints, waypoint_dim, num_heads = shape.waypoints, shape.waypoint_dim, shape.num_heads
@@ -102,6 +104,7 @@ class CellReadout(nn.Module):
             self.register_buffer("ray_direction", directions.float())
             self.height = nn.Parameter(torch.full((num_heads, waypoints), INITIAL_HEIGHT_M))
         self.where_logits = nn.ModuleList(nn.Linear(dim, waypoints) for _ in range(num_heads))
+        self.prior_weight = nn.Parameter(torch.zeros(num_heads, waypoints)) if prior else None
         self.vote = nn.ModuleList(
             nn.Sequential(
                 nn.Linear(dim + 2, hidden), nn.ReLU(), nn.Linear(hidden, waypoints * waypoint_dim)
@@ -127,12 +130,19 @@ class CellReadout(nn.Module):
         point = torch.cat((point[..., :2] + shift, point[..., 2:]), dim=-1)
         return torch.cat((point, attributes), dim=-1)
 
-    def where(self, x: torch.Tensor, head: int) -> torch.Tensor:
-        """``p_j``: tokens ``(B, L, d)`` of samples of waypoint head ``head`` -> ``(B, L, N)``, a
-        softmax over the cells per waypoint."""
-        return torch.softmax(self.where_logits[head](x), dim=1)
+    def where(self, x: torch.Tensor, head: int, prior: torch.Tensor | None = None) -> torch.Tensor:
+        """``p_j``: tokens ``(B, L, d)`` of samples of waypoint head ``head`` (and their prior
+        ``(B, L)``) -> ``(B, L, N)``, a softmax over the cells per waypoint."""
+        logits = self.where_logits[head](x)
+        if (prior is None) != (self.prior_weight is None):
+            raise ValueError("a readout built with prior=True takes a prior, and only such a one")
+        if prior is not None and self.prior_weight is not None:
+            logits = logits + prior[..., None] * self.prior_weight[head]
+        return torch.softmax(logits, dim=1)
 
-    def forward(self, x: torch.Tensor, head: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self, x: torch.Tensor, head: torch.Tensor, prior: torch.Tensor | None = None
+    ) -> torch.Tensor:
         b, cells = x.shape[:2]
         values_in = torch.cat((x, self.cell_xy.expand(b, -1, -1)), dim=-1)
         out = x.new_empty(b, self.waypoints, self.waypoint_dim)
@@ -140,7 +150,7 @@ class CellReadout(nn.Module):
             rows = head == i
             if not bool(rows.any()):
                 continue
-            where = self.where(x[rows], i)  # (b_i, L, N)
+            where = self.where(x[rows], i, None if prior is None else prior[rows])  # (b_i, L, N)
             votes = self.vote[i](values_in[rows]).view(-1, cells, self.waypoints, self.waypoint_dim)
             if self.rays:
                 votes = self._ray_points(votes, i)

@@ -158,6 +158,11 @@ class AwdaConfig:
     demo_reference_frame: bool = False
     """``demo-to-scene`` head: each demo token also holds its cell as the demo's first frame
     showed it (:mod:`awda_bench.models.demo_to_scene`)."""
+    identification_weight: float = 0.0
+    """Weight of the ``demo-pointer`` head's identification loss beside the Soft-DTW loss
+    (:mod:`awda_bench.models.identification_loss`); 0 trains on the Soft-DTW loss alone, as the
+    reference. Needs the ``demo-pointer`` head and a camera (the labels are trajectory points
+    projected onto the cells)."""
     camera_intrinsic: tuple[float, ...] = ()
     """The agent camera's 3x3 ``intrinsic_cv``, row-major (9 numbers), or empty. With a camera the
     cell heads (``demo-to-scene``, ``demo-pointer``) vote points on the rays through o_1's cells (the reference mapped
@@ -200,6 +205,21 @@ class AwdaConfig:
         _check(self.gamma > 0.0, o, "gamma", self.gamma, "a float > 0")
         _check(
             self.attribute_scale >= 0.0, o, "attribute_scale", self.attribute_scale, "a float >= 0"
+        )
+        _check(
+            self.identification_weight == 0.0
+            or (self.trunk.head == "demo-pointer" and sizes == (9, 12, 2)),
+            o,
+            "identification_weight",
+            self.identification_weight,
+            "0, or > 0 with head = 'demo-pointer' and a camera",
+        )
+        _check(
+            self.identification_weight >= 0.0,
+            o,
+            "identification_weight",
+            self.identification_weight,
+            "a float >= 0",
         )
 
     @property

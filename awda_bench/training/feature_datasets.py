@@ -6,7 +6,7 @@ cached feature maps (:mod:`awda_bench.training.feature_cache`)::
 
     "demo_features"        (demo_frames, C, h, w) float32
     "first_frame_features" (C, h, w) float32
-    "trajectory", "head"   as AwdaPairDataset
+    "trajectory", "demo_trajectory", "head"   as AwdaPairDataset
 
 Labels are read once and kept in memory (the episode files are not touched again).
 """
@@ -46,7 +46,9 @@ class CachedAwdaPairs:
         root = pairs.data
         self._names = {_key(ref): episode_name(root, ref) for ref, _ in frames_needed(pairs)}
         self._labels = {
-            _key(agent): torch.from_numpy(pairs.trajectory(agent)) for agent, _, _ in pairs.pairs
+            _key(ref): torch.from_numpy(pairs.trajectory(ref))
+            for agent, demo, _ in pairs.pairs
+            for ref in (agent, demo)
         }
 
     def __len__(self) -> int:
@@ -60,5 +62,6 @@ class CachedAwdaPairs:
             "demo_features": self.cache.features(self._names[_key(demo)], demo_idx),
             "first_frame_features": first[0],
             "trajectory": self._labels[_key(agent)],
+            "demo_trajectory": self._labels[_key(demo)],
             "head": torch.tensor(head, dtype=torch.int64),
         }

@@ -15,7 +15,7 @@ Layout::
               attention_head_dim, dropout, hidden_dim, feature_dim, head_hidden_dim, backbone,
               backbone_stride,
               freeze_backbone, backbone_weights, head, demo_reference_frame,
-              points_per_segment, gamma, attribute_scale, trajectory_points,
+              identification_weight, points_per_segment, gamma, attribute_scale, trajectory_points,
               frame_stack, mixture_components, depth_height_px, depth_width_px
     [train]   batch_size, learning_rate, max_steps, snapshot_every_steps,
               validate_every_steps, validation_batches, seed
@@ -85,6 +85,9 @@ class ModelRecipe:
     (:mod:`awda_bench.models.demo_pointer`)."""
     demo_reference_frame: bool = False
     """``demo-to-scene`` only: demo tokens also hold their cell in the demo's first frame."""
+    identification_weight: float = 0.0
+    """``demo-pointer`` only: weight of the identification loss beside the Soft-DTW loss
+    (:mod:`awda_bench.models.identification_loss`; 0: Soft-DTW alone, as the reference)."""
     points_per_segment: int = 12
     """Interpolated points per polyline segment (AWDA loss)."""
     gamma: float = 1e-3
@@ -109,6 +112,13 @@ class ModelRecipe:
         for name in ("demo_frames", "trajectory_points"):
             _need(getattr(self, name) >= 2, o, name, getattr(self, name), "an int >= 2")
         _need(self.gamma > 0, o, "gamma", self.gamma, "a float > 0")
+        _need(
+            self.identification_weight >= 0,
+            o,
+            "identification_weight",
+            self.identification_weight,
+            "a float >= 0",
+        )
         _need(self.frame_stack >= 2, o, "frame_stack", self.frame_stack, "an int >= 2")
 
 

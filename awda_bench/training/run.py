@@ -233,13 +233,10 @@ def agent_camera(data: CollectedData) -> dict[str, Any]:
     }
 
 
-def model_config(
-    recipe: Recipe, column: Column, camera: dict[str, Any] | None = None
-) -> AwdaConfig | TosviConfig:
-    """The network ``column`` trains under ``recipe``; ``camera`` (:func:`agent_camera`) is what
-    the cell heads (``demo-to-scene``, ``demo-pointer``) vote along."""
+def trunk_config(recipe: Recipe) -> TrunkConfig:
+    """The visual trunk every column of ``recipe`` shares."""
     m = recipe.model
-    trunk = TrunkConfig(
+    return TrunkConfig(
         image_height_px=m.image_height_px,
         image_width_px=m.image_width_px,
         demo_frames=m.demo_frames,
@@ -255,11 +252,21 @@ def model_config(
         hidden_dim=m.hidden_dim,
         feature_dim=m.feature_dim,
     )
+
+
+def model_config(
+    recipe: Recipe, column: Column, camera: dict[str, Any] | None = None
+) -> AwdaConfig | TosviConfig:
+    """The network ``column`` trains under ``recipe``; ``camera`` (:func:`agent_camera`) is what
+    the cell heads (``demo-to-scene``, ``demo-pointer``) vote along."""
+    m = recipe.model
+    trunk = trunk_config(recipe)
     if column.arch == "awda":
         return AwdaConfig(
             trunk=trunk,
             head_hidden_dim=m.head_hidden_dim,
             demo_reference_frame=m.demo_reference_frame,
+            identification_weight=m.identification_weight,
             num_heads=column.num_heads,
             points_per_segment=m.points_per_segment,
             gamma=m.gamma,
@@ -314,7 +321,7 @@ def with_cached_features(
     dataset: AwdaPairDataset, recipe: Recipe, column: Column, progress: bool
 ) -> CachedAwdaPairs:
     """``dataset`` served from the frozen backbone's feature cache (built first if needed)."""
-    trunk = model_config(recipe, column).trunk
+    trunk = trunk_config(recipe)
     normalize, backbone, _ = build_frame_encoder(trunk, load_weights=True)
     backbone.eval()
 

@@ -1,0 +1,75 @@
+r"""The ``demo-pointer`` head's identification loss: two cross-entropies onto cells read from the
+trajectories themselves.
+
+Soft-DTW on the waypoints alone did not teach the head *which* object the demo shows in a way that
+transfers to an unseen (object, compartment) pairing (``reports/learned/recipe-study.md``,
+sessions 10-11): it fitted the training pairs and stayed at chance on the held-out tasks. Supervised
+directly, the same frozen features identify the object in held-out pairs at 0.96-0.99 within 300
+steps (``scripts/screening/identify.py``). The labels come from the recorded trajectories, as the
+waypoints do; no simulator state::
+
+    demo cell   where the demonstrator's TCP is at its first grasp, projected through the scene
+                camera onto the demo's first frame's grid          -> CE on the what-moved logits
+    o_1 cell    where the agent trajectory's first grasping point is, projected onto o_1's grid
+                                                                   -> CE on the object logits
+
+Rows without a grasp (synthesized trajectories, tasks that never close the gripper) are left out.
+A deviation from the reference, which trains on the Soft-DTW loss alone; it is stated where it is
+switched on (``AwdaConfig.identification_weight``, the recipe files).
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from awda_bench.models.cell_readout import Camera
+
+GRASP_ATTRIBUTE = 0
+"""Index of *object grasped* among a trajectory's attribute channels (``AwdaConfig``)."""
+
+
+def grasp_cells(
+    trajectory: torch.Tensor, camera: Camera, grid: tuple[int, int]
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``trajectory (B, P, 3 + k)`` (world xyz [m], attributes in [0, 1]) -> the grid cell
+    ``(B,)`` of each row's first grasping point seen through ``camera``, and ``(B,)`` bool: the row
+    grasps at all and the point is in front of the camera."""
+    intrinsic, extrinsic, (height, width) = camera
+    grasping = trajectory[..., 3 + GRASP_ATTRIBUTE] > 0.5  # (B, P)
+    first = torch.argmax(grasping.to(torch.int8), dim=1)  # first True (0 when none)
+    point = trajectory[torch.arange(len(trajectory)), first, :3].double()
+    cam = point @ extrinsic[:, :3].T.to(point) + extrinsic[:, 3].to(point)
+    uvw = cam @ intrinsic.T.to(point)
+    ahead = uvw[:, 2] > 1e-6
+    uv = uvw[:, :2] / uvw[:, 2:3].clamp_min(1e-6)
+    h, w = grid
+    row = torch.floor(uv[:, 1] * h / height).clamp(0, h - 1).long()
+    col = torch.floor(uv[:, 0] * w / width).clamp(0, w - 1).long()
+    return row * w + col, grasping.any(dim=1) & ahead
+
+
+def identification_loss(
+    moved_logits: torch.Tensor,
+    object_logits: torch.Tensor,
+    demo_trajectory: torch.Tensor,
+    trajectory: torch.Tensor,
+    camera: Camera,
+    grid: tuple[int, int],
+) -> tuple[torch.Tensor, dict[str, float]]:
+    """Mean of the two cross-entropies (module docstring) over the rows where both the demo and
+    the agent trajectory grasp; zero (with the graph) when none does. ``*_logits (B, h*w)``."""
+    demo_cell, demo_ok = grasp_cells(demo_trajectory, camera, grid)
+    agent_cell, agent_ok = grasp_cells(trajectory, camera, grid)
+    rows = demo_ok & agent_ok
+    if not bool(rows.any()):
+        zero = (moved_logits.sum() + object_logits.sum()) * 0.0
+        return zero, {"id_moved": 0.0, "id_object": 0.0, "id_rows": 0.0}
+    moved = F.cross_entropy(moved_logits[rows], demo_cell[rows])
+    found = F.cross_entropy(object_logits[rows], agent_cell[rows])
+    info = {
+        "id_moved": float(moved.detach()),
+        "id_object": float(found.detach()),
+        "id_rows": float(rows.float().mean()),
+    }
+    return moved + found, info

@@ -1,0 +1,162 @@
+"""The ``demo-pointer`` head and its identification loss: content, not place; the object to grasp
+identified by appearance, so an unseen (object, destination) pairing is found."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+import torch.nn.functional as F
+
+from awda_bench.errors import UsageError
+from awda_bench.models.awda_net import AwdaNet
+from awda_bench.models.cell_readout import CellHeadShape
+from awda_bench.models.config import AwdaConfig, TrunkConfig
+from awda_bench.models.demo_pointer import DemoPointer
+from awda_bench.models.identification_loss import grasp_cells
+
+K = np.array([[219.66, 0.0, 160.0], [0.0, 219.66, 120.0], [0.0, 0.0, 1.0]])
+E = np.array(
+    [[0.0, 1.0, 0.0, 0.0], [0.8396, 0.0, -0.5433, 0.1007], [-0.5433, 0.0, -0.8396, 0.7447]]
+)
+
+
+def _shape(grid: tuple[int, int], frames: int) -> CellHeadShape:
+    return CellHeadShape(
+        channels=8, grid=grid, demo_frames=frames, dim=16, dropout=0.0, hidden=32,
+        waypoints=5, waypoint_dim=4, num_heads=2,
+    )  # fmt: skip
+
+
+def test_the_demo_pointer_points_by_content_not_by_place() -> None:
+    """Moving everything the demo and o_1 show by a few cells moves every waypoint's score, the
+    what-moved logits and the object logits over the cells by the same cells: the head has no
+    absolute position to memorize scenes by (``demo-to-scene``, which has, does not pass this)."""
+    torch.manual_seed(0)
+    grid, dy, dx = (12, 16), 2, 3
+    head = DemoPointer(_shape(grid, 4)).eval()
+    with torch.no_grad():
+        head.readout.prior_weight.normal_()  # the object logits take part in every score
+    demo = torch.zeros(1, 4, 8, *grid)
+    first = torch.zeros(1, 8, *grid)
+    # content in the middle, empty cells around it
+    demo[..., 3:7, 4:9] = torch.randn(1, 4, 8, 4, 5)
+    first[..., 3:7, 4:9] = torch.randn(1, 8, 4, 5)
+
+    def scores(demo: torch.Tensor, first: torch.Tensor) -> torch.Tensor:
+        with torch.no_grad():
+            x, moved, found = head.tokens(demo, first)
+            where = (
+                head.readout.where_logits[1](x) + found[..., None] * head.readout.prior_weight[1]
+            )
+            return torch.cat((where, moved[..., None], found[..., None]), -1).view(*grid, 7)
+
+    p = scores(demo, first)
+    q = scores(*(torch.roll(x, (dy, dx), dims=(-2, -1)) for x in (demo, first)))
+    # the same scores, moved; compared off the image's edge cells (the 3x3 convolutions pad there)
+    torch.testing.assert_close(q[2 + dy : -2, 2 + dx : -2], p[2 : -2 - dy, 2 : -2 - dx])
+    assert float(p.std()) > 0.05  # scores that differ between cells
+
+
+def _scenes(pairs: list[tuple[int, int]], n: int, seed: int) -> tuple[torch.Tensor, ...]:
+    """Synthetic demos: four object kinds (fixed feature vectors) at random cells of rows 0-3, four
+    compartments in row 5; the demo carries object ``k`` into compartment ``j`` over its frames;
+    o_1 shows the four kinds at other random cells. Labels: the object's cell in the demo's first
+    frame and in o_1."""
+    g = torch.Generator().manual_seed(seed)
+    kinds = torch.randn(4, 8, generator=torch.Generator().manual_seed(123)) * 2
+    compartment = torch.randn(8, generator=torch.Generator().manual_seed(7))
+    h, w, frames = 6, 8, 5
+    demo = 0.1 * torch.randn(n, frames, 8, h, w, generator=g)
+    first = 0.1 * torch.randn(n, 8, h, w, generator=g)
+    demo[:, :, :, 5, 1::2] += compartment[None, None, :, None]
+    demo_cell, first_cell = torch.empty(n, dtype=torch.long), torch.empty(n, dtype=torch.long)
+    for i in range(n):
+        k, j = pairs[int(torch.randint(len(pairs), (1,), generator=g))]
+        demo_cells = torch.randperm(4 * w, generator=g)[:4]
+        first_cells = torch.randperm(4 * w, generator=g)[:4]
+        for kind in range(4):
+            r, c = divmod(int(first_cells[kind]), w)
+            first[i, :, r, c] += kinds[kind]
+            r, c = divmod(int(demo_cells[kind]), w)
+            if kind != k:
+                demo[i, :, :, r, c] += kinds[kind]
+                continue
+            for t in range(frames):  # carried from (r, c) to compartment j
+                a = t / (frames - 1)
+                rt, ct = round(r + a * (5 - r)), round(c + a * (2 * j + 1 - c))
+                demo[i, t, :, rt, ct] += kinds[kind]
+        demo_cell[i], first_cell[i] = demo_cells[k], first_cells[k]
+    return demo, first, demo_cell, first_cell
+
+
+def test_identification_finds_the_object_of_an_unseen_pairing() -> None:
+    """Trained with the identification loss on 14 (object, compartment) pairings, the head finds
+    the object of the two held-out pairings (object 3 into compartments 2 and 3: the pick-place
+    suite's held-out tasks) in o_1: it identifies by appearance, not by where the object went."""
+    torch.manual_seed(0)
+    held_out = [(3, 2), (3, 3)]
+    seen = [(k, j) for k in range(4) for j in range(4) if (k, j) not in held_out]
+    head = DemoPointer(_shape((6, 8), 5))
+    opt = torch.optim.Adam(head.parameters(), 3e-3)
+    for step in range(150):
+        demo, first, demo_cell, first_cell = _scenes(seen, 32, seed=step)
+        _, moved, found = head.tokens(demo, first)
+        loss = F.cross_entropy(moved, demo_cell) + F.cross_entropy(found, first_cell)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    head.eval()
+    demo, first, _, first_cell = _scenes(held_out, 200, seed=10_000)
+    with torch.no_grad():
+        found = head.tokens(demo, first)[2]
+    assert float((found.argmax(1) == first_cell).float().mean()) >= 0.9
+
+
+def test_grasp_cells_project_the_first_grasping_point() -> None:
+    camera = (torch.tensor(K), torch.tensor(E), (240, 320))
+    point = np.array([-0.1, 0.05, 0.02])
+    cam = E[:, :3] @ point + E[:, 3]
+    u, v = (K @ cam)[:2] / cam[2]
+    want = int(v // 16) * 20 + int(u // 16)
+    trajectory = torch.zeros(2, 6, 4, dtype=torch.float32)
+    trajectory[:, :, :3] = torch.tensor([0.3, 0.3, 0.3])  # elsewhere, not grasping
+    trajectory[0, 2:, :3] = torch.tensor(point, dtype=torch.float32)
+    trajectory[0, 2:, 3] = 1.0  # grasps from point 2 on
+    cells, grasps = grasp_cells(trajectory, camera, (15, 20))
+    assert int(cells[0]) == want
+    assert grasps.tolist() == [True, False]  # row 1 never grasps: no label
+
+
+def test_identification_weight_needs_the_pointer_and_a_camera() -> None:
+    camera = {
+        "camera_intrinsic": tuple(K.ravel()),
+        "camera_extrinsic": tuple(E.ravel()),
+        "camera_size": (240, 320),
+    }
+    pointer = TrunkConfig(
+        backbone="efficientnet-lite0", backbone_stride=16, freeze_backbone=True,
+        head="demo-pointer", attention_head_dim=8,
+    )  # fmt: skip
+    with pytest.raises(UsageError, match="identification_weight"):
+        AwdaConfig(trunk=pointer, identification_weight=1.0)  # no camera
+    with pytest.raises(UsageError, match="identification_weight"):
+        AwdaConfig(trunk=TrunkConfig(head="demo-to-scene"), identification_weight=1.0, **camera)
+    config = AwdaConfig(trunk=pointer, identification_weight=1.0, **camera)
+    model = AwdaNet(config, load_backbone_weights=False)
+    torch.manual_seed(0)
+    trajectory = torch.zeros(2, 10, 4)
+    trajectory[:, :, :3] = torch.tensor([-0.1, 0.05, 0.02])
+    trajectory[:, 4:, 3] = 1.0
+    batch = {
+        "demo_features": torch.randn(2, 10, 112, 15, 20),
+        "first_frame_features": torch.randn(2, 112, 15, 20),
+        "trajectory": trajectory,
+        "demo_trajectory": trajectory,
+        "head": torch.zeros(2, dtype=torch.long),
+    }
+    loss, info = model.compute_loss(batch)
+    assert info["id_rows"] == 1.0 and info["id_moved"] > 0 and info["id_object"] > 0
+    loss.backward()
+    assert model.scene_head is not None
+    assert model.scene_head.moved[0].weight.grad is not None  # the what-moved convs learn
