@@ -20,6 +20,7 @@ from test_collect import tiny_collection_dir
 from awda_bench.cli import main
 from awda_bench.data.datasets import AwdaPairDataset, CollectedData
 from awda_bench.errors import UsageError
+from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig, TrunkConfig
 from awda_bench.models.snapshot import list_snapshots, load_snapshot
 from awda_bench.training.feature_cache import cache_key, cache_meta, load_or_build
@@ -182,6 +183,37 @@ def test_cache_is_built_once_reused_and_rebuilt_when_damaged(
     path.write_bytes(path.read_bytes()[: len(blob) // 3])
     load_or_build(data, LITE0, needed, encoder, progress=False)
     assert encoder.frames == 3 * encoded
+    data.close()
+
+
+@pytest.mark.slow
+def test_cached_features_are_what_the_model_computes_at_evaluation(
+    tiny: Path, tmp_path: Path
+) -> None:
+    """A cached frame's features equal the frozen trunk's in eval mode on that frame alone (what
+    ``run`` computes live), whoever asked for the cache: batch norm in training mode would make a
+    frame's features depend on the frames encoded with it, and training and evaluation would then
+    see different inputs (session 11: every frozen-trunk snapshot before it did)."""
+    import shutil
+
+    data_dir = tmp_path / "data"
+    shutil.copytree(tiny, data_dir)
+    data = CollectedData(data_dir)
+    trunk = replace(LITE0, image_height_px=64, image_width_px=80)
+    pairs = AwdaPairDataset(data, image_size=(64, 80))
+    sample = CachedAwdaPairs(
+        pairs, load_or_build(data, trunk, frames_needed(pairs), progress=False)
+    )[0]
+    plain = pairs[0]
+    model = AwdaNet(AwdaConfig(trunk=trunk)).train()  # a training loop's mode: the trunk stays put
+    with torch.no_grad():
+        live = model.trunk.frame_features(plain["first_frame"][None, None])[0, 0]
+        demo = model.trunk.frame_features(plain["demo"][None])[0]
+    # float16 storage, and another batch through the same eval-mode network: rounding only (in
+    # training mode the features differed by about their own size: 4.3 mean on 4.8)
+    close = {"atol": 2e-2, "rtol": 2e-3}
+    torch.testing.assert_close(sample["first_frame_features"], live.half().float(), **close)
+    torch.testing.assert_close(sample["demo_features"], demo.half().float(), **close)
     data.close()
 
 

@@ -36,6 +36,18 @@ def build_frame_encoder(
     return nn.Identity(), encoder, encoder.channels  # Lite0 applies its own normalization
 
 
+def frozen_encoder(config: TrunkConfig) -> nn.Module:
+    """``normalize`` then the pretrained ``backbone`` of ``config`` as one module, in eval mode and
+    without gradients: the features a frozen trunk gives, the same for every frame whatever else
+    is in its batch. (In training mode batch norm would use each batch's statistics, and the
+    features of a frame would depend on the frames encoded with it: a cache built so differs from
+    what evaluation computes by as much as the features themselves, measured in session 11.)"""
+    normalize, backbone, _ = build_frame_encoder(config, load_weights=True)
+    encoder = nn.Sequential(normalize, backbone).eval()
+    encoder.requires_grad_(False)
+    return encoder
+
+
 def feature_map_size(config: TrunkConfig, height_px: int, width_px: int) -> tuple[int, int]:
     """Spatial size of the encoder's output for an input of ``height_px x width_px``: ceil(H / s),
     ceil(W / s) for both backbones (ResNet-18's five stride-2 stages each keep the ceiling, and

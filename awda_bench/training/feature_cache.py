@@ -39,11 +39,14 @@ import torch
 from awda_bench.data.datasets import CollectedData, EpisodeRef, frames_tensor
 from awda_bench.errors import CorruptFileError
 from awda_bench.models.config import TrunkConfig
+from awda_bench.models.frame_encoder import frozen_encoder
 
 log = logging.getLogger(__name__)
 
-FORMAT_VERSION = 1
-"""Bumped whenever what a cache file holds changes meaning."""
+FORMAT_VERSION = 2
+"""Bumped whenever what a cache file holds changes meaning. 2: encoded by
+:func:`~awda_bench.models.frame_encoder.frozen_encoder` (eval-mode batch norm) only; version-1
+files could hold training-mode features from a caller's encoder and are never read."""
 
 CACHE_DIR = "features"
 """Sub-directory of DATA_DIR holding the caches."""
@@ -182,13 +185,15 @@ def load_or_build(
     data: CollectedData,
     trunk: TrunkConfig,
     frames: Sequence[tuple[EpisodeRef, np.ndarray]],
-    encoder: Encoder,
+    encoder: Encoder | None = None,
     *,
     variant: str = "rgb",
     progress: bool = True,
 ) -> FeatureCache:
     """The cache of ``frames`` ((episode, sorted state indices) pairs) for ``trunk`` over ``data``:
-    read when present and sound, otherwise (re)built with ``encoder`` first."""
+    read when present and sound, otherwise (re)built first with ``trunk``'s
+    :func:`~awda_bench.models.frame_encoder.frozen_encoder` (``encoder`` replaces it in tests
+    only: whatever it computes is stored under the trunk's key)."""
     meta = cache_meta(data.fingerprint, trunk, variant)
     key = cache_key(meta)
     folder = data.root / CACHE_DIR
@@ -206,6 +211,8 @@ def load_or_build(
             path.unlink()
     folder.mkdir(exist_ok=True)
     size = (trunk.image_height_px, trunk.image_width_px)
+    if encoder is None:
+        encoder = frozen_encoder(trunk)
     try:
         _encode_into(partial, key, meta, data, refs, encoder, size, progress)
     except (OSError, CorruptFileError) as exc:  # a damaged partial file: start it again

@@ -43,7 +43,6 @@ from awda_bench.models.config import (
     TrainConfig,
     TrunkConfig,
 )
-from awda_bench.models.frame_encoder import build_frame_encoder
 from awda_bench.models.tosvi_net import TosviNet
 from awda_bench.training.augment import BatchTreatment
 from awda_bench.training.columns import Column, column_for
@@ -322,13 +321,7 @@ def with_cached_features(
 ) -> CachedAwdaPairs:
     """``dataset`` served from the frozen backbone's feature cache (built first if needed)."""
     trunk = trunk_config(recipe)
-    normalize, backbone, _ = build_frame_encoder(trunk, load_weights=True)
-    backbone.eval()
-
-    def encode(images: torch.Tensor) -> torch.Tensor:
-        return backbone(normalize(images))
-
-    cache = load_or_build(dataset.data, trunk, frames_needed(dataset), encode, progress=progress)
+    cache = load_or_build(dataset.data, trunk, frames_needed(dataset), progress=progress)
     return CachedAwdaPairs(dataset, cache)
 
 

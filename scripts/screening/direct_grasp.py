@@ -20,7 +20,6 @@ import torch.nn.functional as F
 from awda_bench.data.datasets import AwdaPairDataset, CollectedData
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig, TrunkConfig
-from awda_bench.models.frame_encoder import build_frame_encoder
 from awda_bench.training.feature_cache import load_or_build
 from awda_bench.training.feature_datasets import CachedAwdaPairs, frames_needed
 from awda_bench.training.run import agent_camera
@@ -46,8 +45,7 @@ OBJ = ["milk", "bread", "cereal", "can"]
 def load(path):
     data = CollectedData(path)
     pairs = AwdaPairDataset(data, image_size=(240, 320), include_synthesized=False, allow_test=True)
-    n, b, _ = build_frame_encoder(T, True)
-    cache = load_or_build(data, T, frames_needed(pairs), lambda x: b(n(x)), progress=False)
+    cache = load_or_build(data, T, frames_needed(pairs), progress=False)
     ds = CachedAwdaPairs(pairs, cache)
     info = {}
     for a, _, _ in pairs.pairs:

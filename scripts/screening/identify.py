@@ -29,9 +29,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from awda_bench.data.datasets import AwdaPairDataset, CollectedData, demo_frame_indices
+from awda_bench.data.datasets import AwdaPairDataset, CollectedData
 from awda_bench.models.config import TrunkConfig
-from awda_bench.models.frame_encoder import build_frame_encoder
 from awda_bench.training.feature_cache import load_or_build
 from awda_bench.training.feature_datasets import CachedAwdaPairs, frames_needed
 
@@ -71,8 +70,7 @@ def cell_index(rc: np.ndarray) -> int:
 def load(path):
     data = CollectedData(path)
     pairs = AwdaPairDataset(data, image_size=(240, 320), include_synthesized=False, allow_test=True)
-    n, b, _ = build_frame_encoder(T, True)
-    cache = load_or_build(data, T, frames_needed(pairs), lambda x: b(n(x)), progress=False)
+    cache = load_or_build(data, T, frames_needed(pairs), progress=False)
     ds = CachedAwdaPairs(pairs, cache)
     info = {}
     for agent, demo, _ in pairs.pairs:
@@ -134,7 +132,8 @@ class Identify(nn.Module):
 train_ds, train_info, train_keys = load(sys.argv[2])
 test_ds, test_info, test_keys = load(sys.argv[3])
 sample = train_ds[0]
-model = Identify(sample["first_frame_features"].shape[0], sample["demo_features"].shape[0])
+used = {"first": 1, "pre": 3}.get(MOVED_FRAMES, sample["demo_features"].shape[0])
+model = Identify(sample["first_frame_features"].shape[0], used)
 opt = torch.optim.Adam(model.parameters(), 5e-4)
 
 
@@ -163,7 +162,7 @@ def evaluate(ds, info, keys, n=400):
             demo, first, demo_cell, agent_cell = batch(ds, info, keys, part)
             moved, score = model(demo, first)
             for i, m, s, dc, ac in zip(
-                part, moved.argmax(1), score.argmax(1), demo_cell, agent_cell
+                part, moved.argmax(1), score.argmax(1), demo_cell, agent_cell, strict=True
             ):
                 found_demo.append(near(int(m), int(dc)))
                 found_agent.append(near(int(s), int(ac)))

@@ -30,14 +30,7 @@ pairs = AwdaPairDataset(
     include_synthesized=False,
     allow_test=True,
 )
-backbone = model.trunk.backbone
-
-
-def encode(x):
-    return backbone(model.trunk.normalize(x))
-
-
-cache = load_or_build(data, trunk, frames_needed(pairs), encode, progress=False)
+cache = load_or_build(data, trunk, frames_needed(pairs), progress=False)
 ds = CachedAwdaPairs(pairs, cache)
 rng = np.random.default_rng(0)
 idx = rng.choice(
