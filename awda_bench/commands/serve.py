@@ -11,6 +11,7 @@ be served.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 from awda_bench.errors import UsageError
@@ -119,5 +120,8 @@ def run(args: argparse.Namespace) -> int:
             f"{server.url}`",
             flush=True,
         )
-        server.serve_forever()
+        try:
+            server.serve_forever()
+        except KeyboardInterrupt:  # Ctrl-C is how a server is stopped
+            print("policy server stopped", file=sys.stderr)
     return 0
