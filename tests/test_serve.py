@@ -122,6 +122,19 @@ def test_a_served_policy_plays_the_same_episodes_as_in_process(suites, tmp_path)
     assert {r[7] for r in rows} == {0, 1}  # the outcomes depend on the actions
 
 
+def test_run_method_remote_from_the_command_line_with_a_worker_process(suites, tmp_path) -> None:
+    out = tmp_path / "cli"
+    with serving(build_server("random")) as url:
+        code = main(
+            ["run", "--suite", "fake", "--tasks-dir", str(suites), "--out", str(out),
+             "--method", "remote", "--policy-url", url, "--policy-timeout", "30",
+             "--workers", "1", "--episodes", "2", "--no-progress"]
+        )  # fmt: skip
+    assert code == 0
+    _sweep(suites, tmp_path / "local", "random", episodes=2)
+    assert _rows(out) == _rows(tmp_path / "local")
+
+
 class _RecordingObservations:
     """Observations of a fake episode that log every call (what the served policy asked for)."""
 

@@ -51,16 +51,21 @@ class RemoteObservations:
     def rgb(self) -> np.ndarray:
         return np.asarray(self._call("rgb"))
 
-    def wrist_depth(self) -> WristDepth:
-        value = self._call("wrist_depth")
-        assert isinstance(value, WristDepth), type(value)
+    def _record(self, call: str, kind: type) -> Any:
+        value = self._call(call)
+        if not isinstance(value, kind):
+            raise RemotePolicyError(
+                f"{HARNESS} answered {call}() with a {type(value).__name__}, not a "
+                f"{kind.__name__}; check that both sides run the same awda_bench version"
+            )
         return value
+
+    def wrist_depth(self) -> WristDepth:
+        return self._record("wrist_depth", WristDepth)
 
     def camera(self) -> tuple[np.ndarray, np.ndarray]:
         intrinsic, extrinsic = self._call("camera")
         return np.asarray(intrinsic), np.asarray(extrinsic)
 
     def proprio(self) -> Proprioception:
-        value = self._call("proprio")
-        assert isinstance(value, Proprioception), type(value)
-        return value
+        return self._record("proprio", Proprioception)
