@@ -28,6 +28,8 @@ process, sees only what crosses the socket.)
 
 from __future__ import annotations
 
+import random
+import sys
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
@@ -164,6 +166,16 @@ def observations_of(ctx: EpisodeContext) -> Observations:
             "(the harness does: awda_bench.harness.observations.SimObservations)"
         )
     return ctx.observations
+
+
+def seed_globals(seed: int) -> None:
+    """Seed Python's, NumPy's and (if loaded) torch's global generators for one episode (the
+    harness does it before ``env.reset``, a policy server before ``policy.reset``)."""
+    random.seed(seed)
+    np.random.seed(seed)  # noqa: NPY002 (policies may use the legacy global generator)
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.manual_seed(seed)
 
 
 def is_privileged(policy: object) -> bool:

@@ -50,3 +50,9 @@ class MissingExtraError(UsageError):
 
 class PrivilegedAccessError(AwdaError):
     """A method that is not privileged reached for the simulator (``ctx.env``)."""
+
+
+class RemotePolicyError(AwdaError):
+    """A served policy (``run --method remote``) could not be reached, timed out, dropped the
+    connection, raised, or answered with something that is not an action; inside an episode it
+    is recorded as that episode's error (a re-run retries it)."""

@@ -6,6 +6,7 @@
 COMMANDS: tuple[str, ...] = (
     "doctor",
     "run",
+    "serve",
     "report",
     "bench",
     "demo",

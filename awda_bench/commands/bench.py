@@ -10,6 +10,7 @@ imports the chosen one alone, so the CLI starts fast):
     episode-cost  per method: wall s, frames rendered, inference ms of one evaluated episode
     inference   waypoint network forward latency
     soft-dtw    the multi-waypoint Soft-DTW loss per implementation (and its share of a step)
+    serve       a served policy: loopback round trip per step, episodes/min served vs in-process
 """
 
 from __future__ import annotations
@@ -59,13 +60,15 @@ BENCHMARKS: dict[str, tuple[str, str, str, bool]] = {
         "run_soft_dtw_bench",
         False,
     ),
+    "serve": ("awda_bench.benchmarks.serve", "add_serve_args", "run_serve_bench", True),
 }
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "bench",
-        help="speed benchmarks (controller, env, primitives, harness, episode-cost, inference, soft-dtw)",
+        help="speed benchmarks (controller, env, primitives, harness, episode-cost, inference, "
+        "soft-dtw, serve)",
         description="Run one benchmark; 'bench NAME --help' lists its options.",
     )
     parser.add_argument("benchmark", metavar="BENCHMARK", help=f"one of: {', '.join(BENCHMARKS)}")

@@ -9,12 +9,13 @@ from pathlib import Path
 from awda_bench.errors import UsageError
 from awda_bench.harness.backends import add_backend_args
 from awda_bench.harness.episode_specs import EVAL_SPLITS
-from awda_bench.harness.methods import DEFAULT_METHOD, method_names
+from awda_bench.harness.methods import DEFAULT_METHOD, REMOTE_METHOD, method_names
 from awda_bench.harness.results_store import STORE_NAME
 from awda_bench.harness.sweep import SweepConfig, run_sweep
 from awda_bench.harness.worker_pool import DEFAULT_ENV_FACTORY
 from awda_bench.policies.tosvi_policy import ACTION_SELECTS, tosvi_method_name
 from awda_bench.primitives.config import CENTRE_SUFFIX, GRASP_SELECTS
+from awda_bench.serving.remote_policy import DEFAULT_TIMEOUT_S
 from awda_bench.suites import SUITES_DIR, available_suites
 
 QUICK_EPISODES = 3
@@ -39,7 +40,22 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument(
         "--method",
         default=DEFAULT_METHOD,
-        help=f"method ({', '.join(method_names())}); default {DEFAULT_METHOD}",
+        help=f"method ({', '.join(method_names())}, pkg.module:Factory, or {REMOTE_METHOD}: "
+        f"the one served at --policy-url); default {DEFAULT_METHOD}",
+    )
+    parser.add_argument(
+        "--policy-url",
+        metavar="ws://HOST:PORT",
+        help=f"--method {REMOTE_METHOD}: the policy server (`python -m awda_bench serve`); its "
+        "rows are labelled with the method and snapshot it serves",
+    )
+    parser.add_argument(
+        "--policy-timeout",
+        type=float,
+        default=DEFAULT_TIMEOUT_S,
+        metavar="S",
+        help=f"--method {REMOTE_METHOD}: longest wait for one message from the server "
+        f"(default {DEFAULT_TIMEOUT_S:g} s); a timeout is that episode's error",
     )
     parser.add_argument(
         "--num-waypoints",
@@ -175,6 +191,8 @@ def config_from_args(args: argparse.Namespace) -> SweepConfig:
         command=" ".join(["python -m awda_bench", *sys.argv[1:]]),
         label=args.label,
         split=args.split,
+        policy_url=args.policy_url,
+        policy_timeout_s=args.policy_timeout,
     )
 
 

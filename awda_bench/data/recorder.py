@@ -182,7 +182,7 @@ class EpisodeRecorder:
 
     def replay(self, env: Any, job: Attempt) -> None:
         """Play ``job`` again without recording anything (rebuilds the env's history)."""
-        from awda_bench.harness.episode_runner import seed_globals
+        from awda_bench.episode import seed_globals
 
         seed_globals(job.seed)
         reset_kwargs = {"seed": job.seed, "options": {"task": self.suite.task(job.task).reset_task}}
@@ -195,7 +195,7 @@ class EpisodeRecorder:
 
     def record(self, env: Any, env_info: dict[str, Any], job: Attempt) -> EpisodeData:
         """Play and record ``job`` on ``env``; exceptions propagate (the pool reports them)."""
-        from awda_bench.harness.episode_runner import seed_globals
+        from awda_bench.episode import seed_globals
 
         t_start = time.perf_counter()
         task = self.suite.task(job.task)

@@ -4,7 +4,8 @@ Each arrow is one module:
 
 - :mod:`.episode_specs` fixes the episode list and the protocol fingerprint before scheduling;
 - :mod:`.methods` turns a method name (and a snapshot) into a
-  :class:`~awda_bench.episode.Policy`;
+  :class:`~awda_bench.episode.Policy` (``remote``: a policy served elsewhere,
+  :mod:`awda_bench.serving`);
 - :mod:`.env_factory` builds the one env a worker reuses;
 - :mod:`.episode_runner` plays one episode into an :class:`.episode_record.EpisodeRecord`;
 - :mod:`.worker_pool` runs episodes in processes with a watchdog (:mod:`.job_pool` is what every

@@ -22,14 +22,13 @@ Exceptions are *not* caught here: the worker records them as errors with their t
 
 from __future__ import annotations
 
-import random
 import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
-from awda_bench.episode import EpisodeContext, EpisodeSpec, Policy, is_privileged
+from awda_bench.episode import EpisodeContext, EpisodeSpec, Policy, is_privileged, seed_globals
 from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
 from awda_bench.harness.observations import SimObservations
 from awda_bench.suites import Suite
@@ -46,17 +45,6 @@ def info_flag(info: dict[str, Any], key: str) -> bool | None:
     if hasattr(value, "detach"):
         value = value.detach().cpu().numpy()
     return bool(np.asarray(value).reshape(-1)[0])
-
-
-def seed_globals(seed: int) -> None:
-    """Seed Python's, NumPy's and (if loaded) torch's global generators for one episode."""
-    random.seed(seed)
-    np.random.seed(seed)  # noqa: NPY002 (policies may use the legacy global generator)
-    import sys
-
-    torch = sys.modules.get("torch")
-    if torch is not None:
-        torch.manual_seed(seed)
 
 
 def fresh_scene_options(suite: Suite, task: int) -> dict[str, Any]:

@@ -16,6 +16,10 @@ static methods of a policy class)::
 
 and is then evaluated per snapshot with ``--checkpoints DIR``: ``Factory(path)`` builds the
 policy of one snapshot, and each snapshot is keyed in the store by its content hash.
+
+A served method (``--method remote --policy-url ws://HOST:PORT``, see :mod:`awda_bench.serving`)
+is named and keyed by what its server says it serves (:func:`served_method`): one snapshot per
+server, its rows labelled with the served method's name.
 """
 
 from __future__ import annotations
@@ -28,6 +32,12 @@ from typing import Any
 
 from awda_bench.episode import Policy, is_privileged
 from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
+from awda_bench.serving.remote_policy import (
+    DEFAULT_TIMEOUT_S,
+    RemotePolicy,
+    ServedMethod,
+    fetch_server_info,
+)
 
 BUILTIN_SNAPSHOT = "builtin"
 """Snapshot hash recorded for non-learned methods."""
@@ -37,6 +47,9 @@ SNAPSHOT_HOOKS = ("list_snapshots", "load_snapshot")
 
 DEFAULT_METHOD = "gt-waypoints"
 """Evaluated when ``run`` is given no ``--method``."""
+
+REMOTE_METHOD = "remote"
+"""``--method remote``: the method served at ``--policy-url`` (its rows take the served name)."""
 
 
 @dataclass(frozen=True)
@@ -58,6 +71,9 @@ class MethodSpec:
     privileged: bool = False
     """The policy reads the simulator (its ``privileged`` class attribute, which
     :func:`make_policy` checks against this); its rows are marked in the tables."""
+    served: ServedMethod | None = None
+    """Set for a served method: its policy is a :class:`RemotePolicy` talking to this server
+    (``target`` is then unused)."""
 
 
 @dataclass(frozen=True)
@@ -92,6 +108,11 @@ def method_names() -> list[str]:
 
 def get_method(name: str) -> MethodSpec:
     """A registered method, or ``"module:attribute"`` naming a non-learned policy class/factory."""
+    if name == REMOTE_METHOD:
+        raise UsageError(
+            f"--method {REMOTE_METHOD} needs --policy-url ws://HOST:PORT (a server started with "
+            "`python -m awda_bench serve --method ...`)"
+        )
     if name in _REGISTRY:
         return _REGISTRY[name]
     if ":" in name:
@@ -121,6 +142,19 @@ def get_method(name: str) -> MethodSpec:
     raise UnknownChoiceError("method", name, [*method_names(), "module:attribute"])
 
 
+def served_method(url: str, timeout_s: float = DEFAULT_TIMEOUT_S) -> MethodSpec:
+    """The method served at ``url``, named as its server says (one line if it cannot be
+    reached)."""
+    info = fetch_server_info(url, timeout_s)
+    return MethodSpec(
+        name=info.method,
+        target=f"{RemotePolicy.__module__}:{RemotePolicy.__name__}",
+        learned=info.learned,
+        description=f"served at {url}",
+        served=ServedMethod(url=url, info=info, timeout_s=timeout_s),
+    )
+
+
 def resolve(target: str, *, what: str) -> Any:
     """Import ``"module:attribute"`` (the attribute may be dotted: ``"module:Class.method"``); a
     missing module or attribute is a one-line usage error."""
@@ -141,6 +175,8 @@ def resolve(target: str, *, what: str) -> Any:
 
 def make_policy(spec: MethodSpec, snapshot: SnapshotRef) -> Policy:
     """Build the policy of ``spec`` for ``snapshot`` (called inside workers)."""
+    if spec.served is not None:
+        return RemotePolicy(spec.served, name=spec.name)
     factory = resolve(spec.target, what=f"method {spec.name!r}")
     policy = factory(snapshot.path) if spec.learned else factory()
     if not isinstance(policy, Policy):
@@ -165,8 +201,16 @@ def select_snapshots(spec: MethodSpec, checkpoints: Path | None, last_n: int) ->
     """The snapshots to evaluate: the last ``last_n`` in ``checkpoints`` for learned methods.
 
     Every selected file is loaded once here (and discarded) so that a corrupt snapshot is reported
-    before anything is written.
+    before anything is written. A served method evaluates the one snapshot its server serves.
     """
+    if spec.served is not None:
+        if checkpoints is not None:
+            raise UsageError(
+                "--method remote evaluates the snapshot its server serves; drop --checkpoints "
+                "(give it to `serve`, with --snapshot NAME to choose one)"
+            )
+        info = spec.served.info
+        return [SnapshotRef(info.snapshot, info.snapshot_name, None, info.snapshot_order)]
     if not spec.learned:
         if checkpoints is not None:
             raise UsageError(f"method {spec.name!r} is not learned; drop --checkpoints")

@@ -24,11 +24,13 @@ from awda_bench.harness.backends import BACKENDS, EpisodePool, check_backend, op
 from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
 from awda_bench.harness.episode_specs import EvalProtocol, build_episode_specs, make_protocol
 from awda_bench.harness.methods import (
+    REMOTE_METHOD,
     MethodSpec,
     SnapshotRef,
     get_method,
     method_names,
     select_snapshots,
+    served_method,
 )
 from awda_bench.harness.results_store import ResultsStore
 from awda_bench.harness.worker_pool import (
@@ -37,6 +39,7 @@ from awda_bench.harness.worker_pool import (
     WorkerConfig,
     run_inline,
 )
+from awda_bench.serving.remote_policy import DEFAULT_TIMEOUT_S
 from awda_bench.suites import SUITES_DIR, Suite, load_suite
 
 VERSIONED_PACKAGES = (
@@ -103,6 +106,10 @@ class SweepConfig:
     apart checkpoint directories evaluated with the same method (Table S3's columns)."""
     split: str = "test"
     """``test``: the held-out tasks (the protocol); ``train``: the training tasks (fit check)."""
+    policy_url: str | None = None
+    """``method="remote"``: the policy server's ``ws://HOST:PORT``."""
+    policy_timeout_s: float = DEFAULT_TIMEOUT_S
+    """``method="remote"``: longest wait for one message from the server [s]."""
 
 
 @dataclass(frozen=True)
@@ -148,8 +155,19 @@ class SweepResult:
 
 
 def sweep_method(config: SweepConfig) -> MethodSpec:
-    """``config.method``'s spec, named ``config.label`` when one is given."""
-    method = get_method(config.method)
+    """``config.method``'s spec (for ``remote``: what the server at ``config.policy_url``
+    serves), named ``config.label`` when one is given."""
+    if config.method == REMOTE_METHOD and config.policy_url is not None:
+        if config.policy_timeout_s <= 0:
+            raise UsageError(f"--policy-timeout must be positive (got {config.policy_timeout_s})")
+        method = served_method(config.policy_url, config.policy_timeout_s)
+    elif config.policy_url is not None:
+        raise UsageError(
+            f"--policy-url applies to --method {REMOTE_METHOD}, not {config.method!r}; "
+            "drop --policy-url or use --method remote"
+        )
+    else:
+        method = get_method(config.method)
     if config.label is None or config.label == method.name:
         return method
     label = config.label.strip()

@@ -120,7 +120,7 @@ class EpisodeExecutor:
         try:
             key = (job.method.name, job.snapshot.sha256)
             if self._policy is None or self._policy_key != key:
-                self._policy, self._policy_key = None, None
+                self._close_policy()
                 self._policy = make_policy(job.method, job.snapshot)
                 self._policy_key = key
                 setup = time.perf_counter() - t0
@@ -139,7 +139,16 @@ class EpisodeExecutor:
             family = self.suite.task(job.spec.task).family
             return error_record(job, family, traceback.format_exc(), time.perf_counter() - t0)
 
+    def _close_policy(self) -> None:
+        """Let go of the current policy, closing it if it has a ``close`` (a served policy's
+        connection)."""
+        policy, self._policy, self._policy_key = self._policy, None, None
+        close = getattr(policy, "close", None)
+        if close is not None:
+            close()
+
     def close(self) -> None:
+        self._close_policy()
         for env in self.envs.values():
             env.close()
 

@@ -1,0 +1,214 @@
+"""``python -m awda_bench bench serve``: what serving a policy costs, side by side in one run.
+
+1. Round-trip latency per control step on loopback, server in its own process
+   (``python -m awda_bench serve``): ``act`` with one 240x320x3 uint8 frame up (the served
+   policy asks for ``obs.rgb()``, the harness answers) and one action down, and ``act`` with
+   nothing up (``random``)::
+
+       harness --act--> server --observe rgb--> harness --frame (230 kB)--> server --action--> harness
+
+   median and 99th percentile over ``--steps`` steps, after ``--warmup``.
+2. The harness's episodes/min with ``random`` in-process against ``random`` served (the same
+   sweep: suite, episodes, seeds, worker count; each into its own temporary store), and whether
+   the two gave identical per-episode outcomes::
+
+       episodes/min         = episodes / sweep wall time * 60   (worker start-up included)
+       steady episodes/min  = episodes / (wall - start-up) * 60
+       act ms/step          = sum(policy reset + act time) / steps
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sqlite3
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from awda_bench.episode import EpisodeContext, EpisodeSpec
+from awda_bench.harness.methods import served_method
+from awda_bench.harness.results_store import STORE_NAME
+from awda_bench.harness.sweep import SweepConfig, SweepResult, run_sweep
+from awda_bench.serving.remote_policy import RemotePolicy
+from awda_bench.suites import SUITES_DIR
+
+FRAME_SHAPE = (240, 320, 3)
+"""The third-person frame the latency probe sends up each step."""
+
+
+class FrameReadingPolicy:
+    """The latency probe's served policy: reads the third-person frame every step (one frame up)
+    and returns a zero action (one action down)."""
+
+    name = "frame-reading"
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        pass
+
+    def act(self, obs: Any) -> np.ndarray:
+        frame = obs.rgb()
+        action = np.zeros((obs.num_envs, 4), np.float32)
+        action[:, 3] = -1.0 if frame.size else 1.0
+        return action
+
+    @property
+    def done(self) -> bool:
+        return False
+
+    @property
+    def waypoints(self) -> np.ndarray | None:
+        return None
+
+
+class _FixedFrame:
+    """Observations whose frame is always the same random 240x320x3 image (the harness's side of
+    the latency probe; rendering is not what is timed)."""
+
+    num_envs = 1
+
+    def __init__(self) -> None:
+        rng = np.random.default_rng(0)
+        self._frame = rng.integers(0, 256, (1, *FRAME_SHAPE), dtype=np.uint8)
+
+    def rgb(self) -> np.ndarray:
+        return self._frame
+
+
+def add_serve_args(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--suite", default="pick_place", help="suite (default pick_place)")
+    parser.add_argument(
+        "--episodes", type=int, default=1, help="episodes per held-out task (default 1)"
+    )
+    parser.add_argument(
+        "--workers", type=int, default=1, help="harness workers, both sweeps (default 1)"
+    )
+    parser.add_argument("--steps", type=int, default=1000, help="timed steps (default 1000)")
+    parser.add_argument("--warmup", type=int, default=50, help="untimed steps (default 50)")
+    parser.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
+    parser.add_argument("--tasks-dir", type=Path, default=SUITES_DIR, help=argparse.SUPPRESS)
+
+
+@contextmanager
+def _server(method: str) -> Iterator[str]:
+    """``python -m awda_bench serve --method METHOD`` on a free port, in its own process."""
+    env = {**os.environ, "OMP_NUM_THREADS": "1"}
+    command = [sys.executable, "-m", "awda_bench", "serve", "--method", method, "--port", "0"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        assert process.stdout is not None
+        line = process.stdout.readline()
+        if " on ws://" not in line:
+            raise RuntimeError(f"the policy server did not start (exit {process.wait()})")
+        yield line.split(" on ")[1].split(";")[0]
+    finally:
+        process.terminate()
+        process.wait(timeout=30)
+
+
+def _latency_ms(url: str, steps: int, warmup: int) -> np.ndarray:
+    """Per-``act`` round-trip times [ms] of a :class:`RemotePolicy` on ``url``."""
+    served = served_method(url).served
+    assert served is not None
+    policy = RemotePolicy(served)
+    observations = _FixedFrame()
+    spec = EpisodeSpec(suite="bench", task=0, episode=0, seed=0, demo_seed=0)
+    policy.reset(EpisodeContext(None, spec, observations=observations))  # type: ignore[arg-type]
+    times = []
+    try:
+        for step in range(warmup + steps):
+            t0 = time.perf_counter()
+            policy.act(observations)
+            if step >= warmup:
+                times.append((time.perf_counter() - t0) * 1e3)
+    finally:
+        policy.close()
+    return np.asarray(times)
+
+
+def _outcomes(run_dir: Path) -> list[tuple]:
+    db = sqlite3.connect(run_dir / STORE_NAME)
+    try:
+        return db.execute(
+            "SELECT task, episode, status, success_once, success_at_end, reached, grasped, steps "
+            "FROM episodes ORDER BY task, episode"
+        ).fetchall()
+    finally:
+        db.close()
+
+
+def _steps(run_dir: Path) -> int:
+    db = sqlite3.connect(run_dir / STORE_NAME)
+    try:
+        return int(db.execute("SELECT SUM(steps) FROM episodes").fetchone()[0] or 0)
+    finally:
+        db.close()
+
+
+def run_serve_bench(args: argparse.Namespace) -> int:
+    print("round trip per step on loopback (server in its own process):")
+    for method, what in (
+        (f"{__name__}:FrameReadingPolicy", "one 240x320x3 uint8 frame up, one action down"),
+        ("random", "nothing up, one action down"),
+    ):
+        with _server(method) as url:
+            ms = _latency_ms(url, args.steps, args.warmup)
+        print(
+            f"  {what:<48} median {np.median(ms):6.2f} ms  p99 {np.percentile(ms, 99):6.2f} ms  "
+            f"({len(ms)} steps)"
+        )
+
+    rows: list[tuple[str, SweepResult, int]] = []
+    outcomes = []
+    with tempfile.TemporaryDirectory(prefix="awda-bench-serve-") as tmp:
+        with _server("random") as url:
+            for label, method, policy_url in (
+                ("in-process", "random", None),
+                ("served", "remote", url),
+            ):
+                out = Path(tmp) / label
+                config = SweepConfig(
+                    suite=args.suite,
+                    method=method,
+                    policy_url=policy_url,
+                    out=out,
+                    episodes=args.episodes,
+                    seed=args.seed,
+                    workers=args.workers,
+                    suites_dir=args.tasks_dir,
+                    progress=False,
+                    command=f"bench serve ({label})",
+                )
+                rows.append((label, run_sweep(config), _steps(out)))
+                outcomes.append(_outcomes(out))
+    print(
+        f"harness throughput, {args.suite} / random, {args.episodes} episodes per task, "
+        f"{args.workers} worker(s):"
+    )
+    print(
+        f"  {'':>10} {'episodes':>8} {'wall s':>7} {'ep/min':>7} {'steady':>7} "
+        f"{'act ms/step':>11} {'env ms/step':>11}"
+    )
+    for label, r, steps in rows:
+        busy = max(r.wall_time_s - r.startup_s, 1e-9)
+        print(
+            f"  {label:>10} {r.ran:>8} {r.wall_time_s:>7.1f} {r.ran / r.wall_time_s * 60:>7.2f} "
+            f"{r.ran / busy * 60:>7.2f} {r.act_time_s / max(steps, 1) * 1e3:>11.2f} "
+            f"{r.env_time_s / max(steps, 1) * 1e3:>11.2f}"
+        )
+    (_, local, _), (_, served, _) = rows
+    print(
+        f"  served / in-process: {served.ran / served.wall_time_s / (local.ran / local.wall_time_s):.2f}x"
+        " episodes/min"
+    )
+    same = outcomes[0] == outcomes[1]
+    print(f"identical per-episode outcomes, served vs in-process: {'yes' if same else 'NO'}")
+    errors = sum(r.errors for _, r, _ in rows)
+    return 0 if same and not errors else 1

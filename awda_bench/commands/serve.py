@@ -1,0 +1,127 @@
+"""``python -m awda_bench serve``: run a method's policy behind a websocket, for
+``run --method remote --policy-url ws://HOST:PORT`` to evaluate from another process or machine.
+
+One server serves one snapshot: the newest in ``--checkpoints`` (or ``--snapshot NAME``); to
+evaluate several, serve each in turn (or on several ports) and ``run`` against each: the rows are
+keyed by the served snapshot's content hash, so they land beside one another in the store as an
+in-process ``run --snapshots N`` puts them. Privileged methods (which read the simulator) cannot
+be served.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from awda_bench.errors import UsageError
+from awda_bench.harness.methods import (
+    MethodSpec,
+    SnapshotRef,
+    get_method,
+    make_policy,
+    method_names,
+    select_snapshots,
+)
+from awda_bench.serving.protocol import ServerInfo
+from awda_bench.serving.server import PolicyServer
+
+DEFAULT_PORT = 8765
+"""``--port`` when none is given."""
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    parser = subparsers.add_parser(
+        "serve",
+        help="serve a method's policy on a websocket (evaluate it with run --method remote)",
+        description="Build one method's policy and serve it until interrupted; each harness "
+        "worker that connects plays its episodes on a policy of its own. Evaluate it with "
+        "`python -m awda_bench run --suite S --method remote --policy-url ws://HOST:PORT`.",
+    )
+    parser.add_argument(
+        "--method",
+        required=True,
+        help=f"method ({', '.join(method_names())}, or pkg.module:Factory); not a privileged one",
+    )
+    parser.add_argument("--checkpoints", type=Path, help="snapshot directory of a learned method")
+    parser.add_argument(
+        "--snapshot",
+        metavar="NAME",
+        help="learned methods: the snapshot file to serve (default: the newest)",
+    )
+    parser.add_argument(
+        "--host",
+        default="127.0.0.1",
+        help="interface to listen on (default 127.0.0.1; 0.0.0.0 for other machines)",
+    )
+    parser.add_argument(
+        "--port",
+        type=int,
+        default=DEFAULT_PORT,
+        help=f"port (default {DEFAULT_PORT}; 0: any free port, printed)",
+    )
+    return parser
+
+
+def served_snapshot(spec: MethodSpec, checkpoints: Path | None, name: str | None) -> SnapshotRef:
+    """The one snapshot a server of ``spec`` serves: ``name``, or the newest."""
+    if name is not None and not spec.learned:
+        raise UsageError(f"method {spec.name!r} is not learned; drop --snapshot")
+    if name is None:
+        return select_snapshots(spec, checkpoints, last_n=1)[0]
+    refs = select_snapshots(spec, checkpoints, last_n=1_000_000)
+    for ref in refs:
+        if ref.name == name:
+            return ref
+    listed = ", ".join(r.name for r in refs)
+    raise UsageError(f"no snapshot {name!r} in {checkpoints}; choose one of: {listed}")
+
+
+def build_server(
+    method: str,
+    checkpoints: Path | None = None,
+    snapshot_name: str | None = None,
+    host: str = "127.0.0.1",
+    port: int = 0,
+) -> PolicyServer:
+    """A server of ``method`` (one snapshot), listening; one line if it cannot be served."""
+    spec = get_method(method)
+    if spec.privileged:
+        raise UsageError(
+            f"method {spec.name!r} is privileged (it reads the simulator), so it cannot be "
+            f"served: evaluate it in-process with `run --method {spec.name}`"
+        )
+    if not 0 <= port < 65536:
+        raise UsageError(f"--port must be in 0..65535 (got {port})")
+    snapshot = served_snapshot(spec, checkpoints, snapshot_name)
+    info = ServerInfo(
+        method=spec.name,
+        snapshot=snapshot.sha256,
+        snapshot_name=snapshot.name,
+        snapshot_order=snapshot.order,
+        learned=spec.learned,
+    )
+    try:
+        return PolicyServer(lambda: make_policy(spec, snapshot), info, host, port)
+    except OSError as exc:
+        raise UsageError(
+            f"cannot listen on {host}:{port} ({exc.strerror or exc}); choose another --port or "
+            "--host"
+        ) from exc
+
+
+def run(args: argparse.Namespace) -> int:
+    server = build_server(args.method, args.checkpoints, args.snapshot, args.host, args.port)
+    with server:
+        info = server.info
+        print(
+            f"serving {info.method} (snapshot {info.snapshot_name}) on {server.url}; evaluate it "
+            f"with `python -m awda_bench run --suite SUITE --method remote --policy-url "
+            f"{server.url}`",
+            flush=True,
+        )
+        try:
+            server.serve_forever()
+        except KeyboardInterrupt:  # Ctrl-C is how a server is stopped
+            print("policy server stopped", file=sys.stderr)
+    return 0

@@ -1,0 +1,262 @@
+"""``RemotePolicy``: the harness's side of a served policy (``run --method remote``), a
+:class:`~awda_bench.episode.Policy` whose ``reset`` and ``act`` are played by a policy server
+(:mod:`.protocol`), answering its observation requests from the episode's own observations.
+
+Every failure is a one-line :class:`~awda_bench.errors.RemotePolicyError` naming the problem and
+the fix; inside an episode the harness records it as that episode's error, so re-running the
+same command retries it. After a timeout, a dropped connection or a message out of turn the
+connection is closed, and the next episode connects afresh (a restarted server is picked up).
+"""
+
+from __future__ import annotations
+
+from contextlib import ExitStack
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
+from websockets.sync.client import ClientConnection, connect
+
+from awda_bench.episode import EpisodeContext, Observations, observations_of
+from awda_bench.errors import RemotePolicyError
+from awda_bench.serving.protocol import (
+    ACT,
+    ACTION,
+    ERROR,
+    HELLO,
+    MAX_MESSAGE_BYTES,
+    OBSERVATION,
+    OBSERVATION_CALLS,
+    OBSERVATION_ERROR,
+    OBSERVE,
+    PROTOCOL,
+    RESET,
+    RESET_DONE,
+    ServerInfo,
+)
+from awda_bench.serving.wire import pack, unpack
+
+DEFAULT_TIMEOUT_S = 60.0
+"""How long the harness waits for any one message from the server [s]."""
+
+ACTION_DIM = 4
+"""dx, dy, dz, grip."""
+
+
+@dataclass(frozen=True)
+class ServedMethod:
+    """Where a served method is and what it serves (fixed when the run is planned)."""
+
+    url: str
+    """``ws://HOST:PORT`` of the server."""
+    info: ServerInfo
+    """The server's ``hello`` at planning time; a worker refuses a server that now serves
+    another method or snapshot."""
+    timeout_s: float = DEFAULT_TIMEOUT_S
+    """Longest wait for one message [s]."""
+
+
+def _open(url: str, timeout_s: float) -> tuple[ClientConnection, ServerInfo]:
+    """Connect and read the server's hello."""
+    peer = f"the policy server at {url}"
+    try:
+        with ExitStack() as stack:  # websockets 17 wants connect() entered as a context
+            connection = stack.enter_context(
+                connect(
+                    url,
+                    open_timeout=timeout_s,
+                    compression=None,
+                    max_size=MAX_MESSAGE_BYTES,
+                    proxy=None,
+                )
+            )
+            stack.pop_all()  # the caller closes it
+    except InvalidURI as exc:
+        raise RemotePolicyError(f"--policy-url {url!r} is not a ws://HOST:PORT address") from exc
+    except (OSError, TimeoutError, InvalidHandshake) as exc:
+        raise RemotePolicyError(
+            f"cannot reach {peer} ({type(exc).__name__}: {exc}); start it with "
+            "`python -m awda_bench serve --method ... --port PORT` or fix --policy-url"
+        ) from exc
+    try:
+        hello = unpack(connection.recv(timeout=timeout_s), peer=peer)
+    except (TimeoutError, ConnectionClosed) as exc:
+        connection.close()
+        raise RemotePolicyError(
+            f"{peer} accepted the connection but said nothing ({type(exc).__name__}); is it "
+            "`python -m awda_bench serve`?"
+        ) from exc
+    if hello.get("type") != HELLO or hello.get("protocol") != PROTOCOL:
+        connection.close()
+        raise RemotePolicyError(
+            f"{peer} speaks {hello.get('protocol')!r}, this harness {PROTOCOL!r}; run the same "
+            "awda_bench version on both sides"
+        )
+    return connection, ServerInfo.from_message(hello)
+
+
+def fetch_server_info(url: str, timeout_s: float = DEFAULT_TIMEOUT_S) -> ServerInfo:
+    """What the server at ``url`` serves (connects, reads its hello, disconnects)."""
+    connection, info = _open(url, timeout_s)
+    connection.close()
+    return info
+
+
+def check_action(action: Any, num_envs: int, peer: str) -> np.ndarray:
+    """``action`` if it is a finite ``(num_envs, 4)`` numeric array, else a one-line error."""
+    shape = (num_envs, ACTION_DIM)
+    if not isinstance(action, np.ndarray) or action.dtype.kind not in "iuf":
+        raise RemotePolicyError(
+            f"{peer} returned a {type(action).__name__} as the action, not a numeric array; "
+            f"the served policy's act must return a {shape} float array"
+        )
+    if action.shape != shape:
+        raise RemotePolicyError(
+            f"{peer} returned an action of shape {action.shape}, expected {shape} (dx, dy, dz, "
+            "grip per env); fix the served policy's act"
+        )
+    if not np.isfinite(action).all():
+        raise RemotePolicyError(
+            f"{peer} returned an action with NaN or inf ({action.tolist()}); fix the served "
+            "policy's act"
+        )
+    return action
+
+
+class RemotePolicy:
+    """A policy played by the server at ``served.url``; named ``name`` in the store."""
+
+    privileged = False
+
+    def __init__(self, served: ServedMethod, name: str | None = None) -> None:
+        self.served = served
+        self.name = name or served.info.method
+        self._peer = f"the policy server at {served.url}"
+        self._connection: ClientConnection | None = None
+        self._observations: Observations | None = None
+        self._done = False
+        self._waypoints: np.ndarray | None = None
+        self._step = 0
+
+    # ------------------------------------------------------------------ connection
+    def _connect(self) -> ClientConnection:
+        connection, info = _open(self.served.url, self.served.timeout_s)
+        expected = self.served.info
+        if (info.method, info.snapshot) != (expected.method, expected.snapshot):
+            connection.close()
+            raise RemotePolicyError(
+                f"{self._peer} now serves {info.method!r} snapshot {info.snapshot_name} "
+                f"({info.snapshot}); this run evaluates {expected.method!r} snapshot "
+                f"{expected.snapshot_name} ({expected.snapshot}): serve that again, or start a "
+                "new run"
+            )
+        return connection
+
+    def close(self) -> None:
+        """Close the connection (the next ``reset`` opens a new one)."""
+        if self._connection is not None:
+            self._connection.close()
+            self._connection = None
+
+    # ------------------------------------------------------------------ exchanges
+    def _answer(self, connection: ClientConnection, request: dict[str, Any]) -> None:
+        """Answer one ``observe`` request from the episode's observations."""
+        call = request.get("call")
+        if call not in OBSERVATION_CALLS or self._observations is None:
+            reply = {
+                "type": OBSERVATION_ERROR,
+                "message": f"{call!r} is not an observation; ask for one of "
+                f"{', '.join(OBSERVATION_CALLS)}",
+            }
+        else:
+            args = {
+                k: v for k, v in request.get("args", {}).items() if k in OBSERVATION_CALLS[call]
+            }
+            try:
+                value = getattr(self._observations, call)(**args)
+                reply = {"type": OBSERVATION, "value": value}
+            except Exception as exc:  # the served policy sees it raised from its own call
+                reply = {"type": OBSERVATION_ERROR, "message": f"{type(exc).__name__}: {exc}"}
+        connection.send(pack(reply))
+
+    def _exchange(self, message: dict[str, Any], expect: str, during: str) -> dict[str, Any]:
+        """Send ``message``, answer observation requests, return the ``expect`` reply."""
+        if self._connection is None:
+            self._connection = self._connect()
+        connection = self._connection
+        try:
+            connection.send(pack(message))
+            while True:
+                try:
+                    data = connection.recv(timeout=self.served.timeout_s)
+                except TimeoutError as exc:
+                    raise RemotePolicyError(
+                        f"{self._peer} sent nothing for {self.served.timeout_s:g} s during "
+                        f"{during}; if the policy is slow raise --policy-timeout, else check the "
+                        "server's log"
+                    ) from exc
+                reply = unpack(data, peer=self._peer)
+                if reply["type"] == OBSERVE:
+                    self._answer(connection, reply)
+                elif reply["type"] == expect:
+                    self._done = bool(reply.get("done", False))
+                    waypoints = reply.get("waypoints")
+                    self._waypoints = None if waypoints is None else np.asarray(waypoints)
+                    return reply
+                elif reply["type"] == ERROR:
+                    raise _ServedPolicyRaised(
+                        f"the served policy raised during {during}: {reply.get('message')} "
+                        "(traceback in the server's log)"
+                    )
+                else:
+                    raise RemotePolicyError(
+                        f"{self._peer} sent {reply['type']!r} during {during}, expected "
+                        f"{expect!r}; run the same awda_bench version on both sides"
+                    )
+        except _ServedPolicyRaised:
+            raise  # the conversation is in step: keep the connection
+        except ConnectionClosed as exc:
+            self.close()
+            raise RemotePolicyError(
+                f"lost the connection to {self._peer} during {during} ({exc}); restart the "
+                "server and re-run the same command (this episode is recorded as an error "
+                "and retried)"
+            ) from exc
+        except BaseException:
+            self.close()  # out of step (timeout, bad message): the next episode reconnects
+            raise
+
+    # ------------------------------------------------------------------ Policy
+    def reset(self, ctx: EpisodeContext) -> None:
+        self._observations = observations_of(ctx)
+        self._done, self._waypoints = False, None
+        self._step = 0
+        self._exchange(
+            {
+                "type": RESET,
+                "spec": asdict(ctx.spec),
+                "num_envs": int(self._observations.num_envs),
+            },
+            expect=RESET_DONE,
+            during=f"reset (task {ctx.spec.task}, episode {ctx.spec.episode})",
+        )
+
+    def act(self, obs: Any) -> np.ndarray:
+        if self._observations is None:
+            raise RuntimeError("act before reset")
+        self._step += 1
+        reply = self._exchange({"type": ACT}, expect=ACTION, during=f"step {self._step}")
+        return check_action(reply.get("action"), int(self._observations.num_envs), self._peer)
+
+    @property
+    def done(self) -> bool:
+        return self._done
+
+    @property
+    def waypoints(self) -> np.ndarray | None:
+        return self._waypoints
+
+
+class _ServedPolicyRaised(RemotePolicyError):
+    """The served policy raised; the server answered in turn, so the connection stays usable."""
