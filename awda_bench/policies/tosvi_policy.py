@@ -2,19 +2,21 @@
 
 Per episode (SPEC §6; the AWDA paper's evaluator for the baseline)::
 
-    demo video (demonstrator, other layout) --10 frames--> ResNet features, once per episode
-    every step t:  third-person frame o_t --> ResNet features (+ wrist depth d_t --> depth ResNet
-                   vector, for +depth)
+    demo video (demonstrator, other layout) --10 frames--> backbone maps, once per episode
+    every step t:  third-person frame o_t --> backbone map (pooled by ``feature_pool``; + wrist
+                   depth d_t --> depth ResNet vector, for +depth)
                    [demo features, features of o_{t-5} .. o_t (+ depth vectors)] --> attention
                    --> action mixture
                    a_t = sample | mean | mode of the mixture; gripper command binarized (+1 / -1)
 
 The agent stack is a sliding window of the last ``frame_stack`` frames; at the start of an episode
 the missing older frames repeat the first one, exactly as the training samples do
-(:class:`~awda_bench.data.datasets.TosviDataset`). The ResNet sees each frame on its own (frozen
+(:class:`~awda_bench.data.datasets.TosviDataset`). The backbone sees each frame on its own (frozen
 BatchNorm statistics in eval mode), and so does +depth's depth ResNet, so each frame's features
-are computed once and kept: a step costs one frame through the ResNet(s) plus the fusion and
-attention layers, not sixteen RGB and six depth frames.
+are computed once and kept: a step costs one frame through the backbone (and depth ResNet) plus
+the fusion and attention layers, not sixteen RGB and six depth frames. A snapshot trained on a
+frozen backbone's cached features carries that backbone (its weights are in the snapshot), so
+evaluation encodes live frames with exactly the trunk whose features training read.
 
 Frames are rendered by the harness camera (the suite's size) and area-downscaled to the snapshot's
 input size with OpenCV, as the ``train`` loader downscales the collected frames. The network only
@@ -122,7 +124,7 @@ class TosviPolicy:
         demo = observations.demo_frames(self.model.config.trunk.demo_frames)
         start = time.perf_counter()
         with torch.no_grad():
-            self._demo_features = self.model.trunk.frame_features(self._to_tensor(np.asarray(demo)))
+            self._demo_features = self.model.frame_features(self._to_tensor(np.asarray(demo)))
         self.inference_s = time.perf_counter() - start
         self._frames.clear()
         self._depths.clear()
@@ -140,7 +142,7 @@ class TosviPolicy:
             depth_m = _resize(self._observations.wrist_depth().depth_m[0], h, w, nearest=True)
         start = time.perf_counter()
         with torch.no_grad():
-            features = self.model.trunk.frame_features(self._to_tensor(rgb[None]))[:, 0]
+            features = self.model.frame_features(self._to_tensor(rgb[None]))[:, 0]
             depth_vector = None
             if depth_m is not None:
                 tensor = torch.from_numpy(depth_m.astype(np.float32)).to(self.device)

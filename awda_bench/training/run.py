@@ -44,11 +44,16 @@ from awda_bench.models.config import (
     TrunkConfig,
 )
 from awda_bench.models.frame_encoder import build_frame_encoder
-from awda_bench.models.tosvi_net import TosviNet
+from awda_bench.models.tosvi_net import TosviNet, pool_feature_maps
 from awda_bench.training.augment import BatchTreatment
 from awda_bench.training.columns import Column, column_for
 from awda_bench.training.feature_cache import load_or_build
-from awda_bench.training.feature_datasets import CachedAwdaPairs, frames_needed
+from awda_bench.training.feature_datasets import (
+    CachedAwdaPairs,
+    CachedTosviSamples,
+    frames_needed,
+    tosvi_frames_needed,
+)
 from awda_bench.training.logbook import Logbook, plot_learning_curve
 from awda_bench.training.loop import SampleDataset, TrainResult, resolve_device, train
 from awda_bench.training.recipe import Recipe, load_recipe
@@ -277,6 +282,7 @@ def model_config(
         trunk=replace(trunk, head="self-attention"),  # T-OSVI reads every frame's keypoints
         frame_stack=m.frame_stack,
         mixture_components=m.mixture_components,
+        feature_pool=m.tosvi_feature_pool,
         use_depth=column.arch == "tosvi-depth",
         depth_height_px=m.depth_height_px,
         depth_width_px=m.depth_width_px,
@@ -317,18 +323,35 @@ def make_dataset(
     )
 
 
+def cache_variant(pool: int) -> str:
+    """The cache variant of backbone maps average-pooled by ``pool`` (1: the maps themselves,
+    the file AWDA's datasets read)."""
+    return "rgb" if pool == 1 else f"rgb-avgpool{pool}"
+
+
 def with_cached_features(
-    dataset: AwdaPairDataset, recipe: Recipe, column: Column, progress: bool
-) -> CachedAwdaPairs:
-    """``dataset`` served from the frozen backbone's feature cache (built first if needed)."""
+    dataset: AwdaPairDataset | TosviDataset, recipe: Recipe, progress: bool
+) -> CachedAwdaPairs | CachedTosviSamples:
+    """``dataset`` served from the frozen backbone's feature cache (built first if needed).
+    T-OSVI's maps are cached after its ``feature_pool`` (what ``TosviNet.frame_features``
+    returns), under their own variant when pooled."""
     trunk = trunk_config(recipe)
     normalize, backbone, _ = build_frame_encoder(trunk, load_weights=True)
     backbone.eval()
+    pool = recipe.model.tosvi_feature_pool if isinstance(dataset, TosviDataset) else 1
 
     def encode(images: torch.Tensor) -> torch.Tensor:
-        return backbone(normalize(images))
+        return pool_feature_maps(backbone(normalize(images)), pool)
 
-    cache = load_or_build(dataset.data, trunk, frames_needed(dataset), encode, progress=progress)
+    if isinstance(dataset, TosviDataset):
+        needed = tosvi_frames_needed(dataset)
+    else:
+        needed = frames_needed(dataset)
+    cache = load_or_build(
+        dataset.data, trunk, needed, encode, variant=cache_variant(pool), progress=progress
+    )
+    if isinstance(dataset, TosviDataset):
+        return CachedTosviSamples(dataset, cache)
     return CachedAwdaPairs(dataset, cache)
 
 
@@ -389,14 +412,6 @@ def run_training(request: TrainRequest) -> TrainOutcome:
     column = column_for(request.method, request.ablation)
     recipe = load_recipe(request.recipe).with_schedule(request.steps, request.snapshot_every)
     device = resolve_device(request.device)
-    if recipe.model.freeze_backbone and column.arch != "awda":
-        # T-OSVI reads a 6-frame stack at every step of every agent episode: its features are not
-        # cached yet, and through the backbone at 240x320 a step would take minutes here
-        raise UsageError(
-            f"recipe {recipe.name!r} freezes the backbone and trains over cached features, which "
-            f"only AWDA columns have so far; train {column.slug} with --recipe small-scratch "
-            "(or paper on a GPU)"
-        )
     data = open_data(request.data, recipe, column, "--data")
     if data.split != "train":
         raise UsageError(
@@ -426,11 +441,11 @@ def run_training(request: TrainRequest) -> TrainOutcome:
         if val_data is not None
         else None
     )
-    if column.arch == "awda" and recipe.model.freeze_backbone:
-        assert isinstance(dataset, AwdaPairDataset)
-        dataset = with_cached_features(dataset, recipe, column, request.progress)
-        if isinstance(val_dataset, AwdaPairDataset):
-            val_dataset = with_cached_features(val_dataset, recipe, column, request.progress)
+    if recipe.model.freeze_backbone:
+        assert isinstance(dataset, AwdaPairDataset | TosviDataset)
+        dataset = with_cached_features(dataset, recipe, request.progress)
+        if isinstance(val_dataset, AwdaPairDataset | TosviDataset):
+            val_dataset = with_cached_features(val_dataset, recipe, request.progress)
     train_set: SampleDataset = dataset
     if column.arch == "awda" and column.num_heads == 1:
         train_set = OneHead(dataset)
