@@ -96,6 +96,31 @@ def test_cached_maps_give_the_forward_pass(depth: bool) -> None:
         net.forward_features(demo_maps, frame_maps[:, :2], d)
 
 
+@pytest.mark.parametrize("depth", [False, True])
+def test_the_policy_path_equals_the_full_heads_and_refuses_training_mode(depth: bool) -> None:
+    torch.manual_seed(0)
+    net = TosviNet(_config(depth), load_backbone_weights=False).eval()
+    g = torch.Generator().manual_seed(2)
+    maps = torch.randn(2, 5, 112, 2, 3, generator=g)
+    vectors = torch.randn(2, 3, 512, generator=g) if depth else None
+    with torch.no_grad():
+        want, _ = net.heads_from_features(maps, vectors)
+        frames = maps
+        if vectors is not None:  # fused frame by frame, demo frames with zero vectors
+            zeros = torch.zeros(2, 2, 512)
+            frames = torch.cat(
+                [net.fuse_depth(maps[:, :2], zeros)]
+                + [
+                    net.fuse_depth(maps[:, i : i + 1], vectors[:, i - 2 : i - 1]) for i in (2, 3, 4)
+                ],
+                dim=1,
+            )
+        got = net.policy_from_frames(frames)
+    torch.testing.assert_close(got, want, atol=1e-5, rtol=1e-5)
+    with pytest.raises(UsageError, match="eval mode"):
+        net.train().policy_from_frames(maps)
+
+
 def test_frozen_backbone_gets_no_gradient_and_no_optimizer_state_depth_resnet_does(
     tmp_path: Path,
 ) -> None:

@@ -151,16 +151,24 @@ class TosviNet(nn.Module):
         depth_maps = self.depth_backbone(scaled.reshape(b * s, *depth.shape[2:]))
         return depth_maps.mean(dim=(-2, -1)).view(b, s, FEATURE_CHANNELS)
 
-    def _fuse_depth(self, features: torch.Tensor, depth_vec: torch.Tensor) -> torch.Tensor:
-        """RGB features ``(B, T, C, h, w)`` + agent depth vectors ``(B, S, 512)`` -> fused."""
+    def fuse_depth(self, features: torch.Tensor, depth_vectors: torch.Tensor) -> torch.Tensor:
+        """Frames' maps ``(B, T, C, h, w)`` + one depth vector per frame ``(B, T, 512)`` (zeros
+        for demo frames) -> fused maps ``(B, T, C, h, w)``; frame by frame, so a closed-loop
+        policy fuses each frame once."""
         assert self.depth_fusion is not None
         b, t, c, h, w = features.shape
-        s, d = depth_vec.shape[1:]
-        demo_zeros = depth_vec.new_zeros(b, t - s, d)
-        per_frame = torch.cat((demo_zeros, depth_vec), dim=1)  # (B, T, 512)
-        stacked = torch.cat((features, per_frame[..., None, None].expand(-1, -1, -1, h, w)), dim=2)
+        d = depth_vectors.shape[-1]
+        tiled = depth_vectors[..., None, None].expand(-1, -1, -1, h, w)
+        stacked = torch.cat((features, tiled), dim=2)
         fused = self.depth_fusion(stacked.reshape(b * t, c + d, h, w))
         return fused.view(b, t, c, h, w)
+
+    def _fuse_depth(self, features: torch.Tensor, depth_vec: torch.Tensor) -> torch.Tensor:
+        """RGB features ``(B, T, C, h, w)`` + agent depth vectors ``(B, S, 512)`` -> fused."""
+        b, t = features.shape[:2]
+        s, d = depth_vec.shape[1:]
+        demo_zeros = depth_vec.new_zeros(b, t - s, d)
+        return self.fuse_depth(features, torch.cat((demo_zeros, depth_vec), dim=1))
 
     def frame_features(self, frames: torch.Tensor) -> torch.Tensor:
         """``(B, T, 3, H, W)`` RGB in [0, 1] -> each frame's (pooled) backbone map ``(B, T, C, h,
@@ -223,6 +231,17 @@ class TosviNet(nn.Module):
         pairs = torch.cat((vectors[:, :-1], vectors[:, 1:]), dim=-1)
         inverse = self.inverse_head(pairs).view(b, s - 1, cfg.action_dim, -1)
         return policy, inverse
+
+    def policy_from_frames(self, frames: torch.Tensor) -> torch.Tensor:
+        """Eval mode: the policy mixture ``(B, A, 3M)`` for a_t from every frame's attention input
+        ``(B, demo_frames + frame_stack, C, h, w)`` (:meth:`frame_features`; for +depth then
+        :meth:`fuse_depth`, demo frames with zero vectors). The same values as
+        :meth:`heads_from_features`' policy, at about half its cost: the last attention layer
+        queries with a_t's frame alone and the inverse head is skipped."""
+        if self.training:
+            raise UsageError("TosviNet.policy_from_frames is for eval mode (model.eval())")
+        vector = self.trunk.temporal(frames, last_frames=1)[:, 0]
+        return self.policy_head(vector).view(frames.shape[0], self.config.action_dim, -1)
 
     def distribution(self, params: torch.Tensor) -> DiscretizedLogisticMixture:
         return DiscretizedLogisticMixture(params, bins=self.config.action_bins)
