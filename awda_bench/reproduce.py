@@ -93,12 +93,14 @@ class Costs:
     """Per step of a frozen-backbone recipe over cached features (``small``: 0.5-0.6 s alone,
     0.75-0.84 s beside another job; batch 16, 2 threads, 2026-12-02)."""
     frozen_tosvi_step_s: dict[str, float] = field(
-        default_factory=lambda: {"tosvi": 4.9, "tosvi-depth": 11.3}
+        default_factory=lambda: {"tosvi": 5.5, "tosvi-depth": 14.0}
     )
-    """Per T-OSVI step over cached maps pooled 2x2 (``small``: batch 16, 1 thread, niced beside
-    another job; +depth trains its depth ResNet-18 over 96 wrist depth images a step)."""
-    agent_episode_steps: float = 95.0
-    """Mean steps of a kept pick-place agent episode (T-OSVI caches every agent frame)."""
+    """Per T-OSVI step over cached maps pooled 2x2 (``small``: batch 16, 1 thread at nice 19
+    beside a 2-thread job: tosvi 4.9-6.2 s, tosvi-depth 11.3-16.8 s, whose depth ResNet-18 is
+    trained over 96 wrist depth images a step; 2026-12-02)."""
+    agent_episode_steps: float = 62.4
+    """Mean steps of a kept pick-place agent episode (T-OSVI caches every agent frame; the
+    20-per-task train split: 17,472 steps in 280 episodes)."""
     encode_frame_s: float = 0.077
     """Encoding one 240x320 frame into the feature cache (5,080 frames in ~6.5 min, busy)."""
     paper_step_factor: float = 32.0
