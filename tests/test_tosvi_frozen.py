@@ -268,6 +268,12 @@ def test_tosvi_trains_from_the_cache_resumes_the_identical_curve_and_rebuilds_it
     needed = {episode_name(data, ref): idx for ref, idx in tosvi_frames_needed(samples)}
     for agent in data.select("agent"):
         np.testing.assert_array_equal(needed[episode_name(data, agent)], np.arange(agent.steps))
+    # a subset (the validator's samples) needs only its own stacks
+    agent, demo, t = samples.samples[5]
+    assert t == 5
+    few = {episode_name(data, r): i for r, i in tosvi_frames_needed(samples.subset([5]))}
+    np.testing.assert_array_equal(few[episode_name(data, agent)], [3, 4, 5])
+    assert len(few) == 2 and len(few[episode_name(data, demo)]) == 10
 
     def no_encoding(images: torch.Tensor) -> torch.Tensor:
         raise AssertionError("the cache is complete: nothing is encoded again")
@@ -294,14 +300,16 @@ def test_tosvi_trains_from_the_cache_resumes_the_identical_curve_and_rebuilds_it
 
     # +depth and the no-waypoints ablation (ADM on the cached stacks, synthesized episodes added
     # to the same file) train from the same cache
-    depth = ["--method", "tosvi-depth", *common, "--steps", "2"]
+    depth = ["--method", "tosvi-depth", *common, "--steps", "2", "--val-data", str(data_dir)]
     assert main(["train", *depth, "--out", str(tmp_path / "depth")]) == 0
     no_wp = ["--method", "awda", "--ablation", "no-waypoints", *common, "--steps", "2"]
     assert main(["train", *no_wp, "--out", str(tmp_path / "no-wp")]) == 0
     assert list((data_dir / "features").glob("*.h5")) == caches
     for run in ("depth", "no-wp"):
-        losses = read_metrics(tmp_path / run / "metrics.csv")[("train", "loss")]
-        assert len(losses) == 2 and all(np.isfinite(v) for _, v in losses)
+        steps, losses = read_metrics(tmp_path / run / "metrics.csv")[("train", "loss")]
+        assert steps == [1, 2] and np.all(np.isfinite(losses))
+    steps, losses = read_metrics(tmp_path / "depth" / "metrics.csv")[("val", "loss")]
+    assert steps == [0, 2] and np.all(np.isfinite(losses))
 
 
 class CountingEncoder:

@@ -35,6 +35,7 @@ each open their own handles).
 
 from __future__ import annotations
 
+import copy
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -373,6 +374,14 @@ class TosviDataset:
 
     def __len__(self) -> int:
         return len(self.samples)
+
+    def subset(self, indices: Iterable[int]) -> TosviDataset:
+        """This dataset reduced to the samples at ``indices``, in that order."""
+        reduced = copy.copy(self)
+        reduced.samples = [self.samples[i] for i in indices]
+        if not reduced.samples:
+            raise UsageError("a T-OSVI subset needs at least one sample")
+        return reduced
 
     def stack_indices(self, t: int) -> np.ndarray:
         """The state indices of step ``t``'s agent stack: ``t-5 .. t``, those below 0 at 0."""

@@ -84,22 +84,22 @@ class CachedAwdaPairs:
 
 
 def tosvi_frames_needed(samples: TosviDataset) -> list[tuple[EpisodeRef, np.ndarray]]:
-    """Every episode the T-OSVI samples read, with the sorted state indices they read of it: an
-    agent episode's stacks cover states 0 .. T-1 (state T, after the last action, is never in a
-    stack); a demonstrator's, its demo frames; both for self-paired synthesized episodes."""
+    """Every episode the T-OSVI samples read, with the sorted state indices they read of it: the
+    agent stacks of every sample (all steps of an episode: states 0 .. T-1; state T, after the
+    last action, is in no stack); a demonstrator's demo frames; both for self-paired synthesized
+    episodes."""
     refs: dict[tuple[str, str], EpisodeRef] = {}
     needed: dict[tuple[str, str], set[int]] = {}
-    done: set[tuple[str, str, str]] = set()  # (file, traj, as agent / as demo): read once each
-    for agent, demo, _ in samples.samples:
-        for ref, role, idx in (
-            (agent, "agent", range(agent.steps)),
-            (demo, "demo", demo_frame_indices(demo.steps, samples.demo_frames)),
-        ):
-            key = _key(ref)
-            if (*key, role) in done:
-                continue
-            done.add((*key, role))
-            refs[key] = ref
+    demos_done: set[tuple[str, str]] = set()
+    for agent, demo, t in samples.samples:
+        key = _key(agent)
+        refs[key] = agent
+        needed.setdefault(key, set()).update(int(i) for i in samples.stack_indices(t))
+        key = _key(demo)
+        if key not in demos_done:
+            demos_done.add(key)
+            refs[key] = demo
+            idx = demo_frame_indices(demo.steps, samples.demo_frames)
             needed.setdefault(key, set()).update(int(i) for i in idx)
     return [(refs[k], np.array(sorted(v), dtype=np.int64)) for k, v in needed.items()]
 

@@ -371,14 +371,18 @@ class OneHead:
         return sample
 
 
+def validation_indices(size: int, batch_size: int, batches: int, seed: int) -> list[int]:
+    """The samples (of ``size``) a :class:`Validator` reads, in its order."""
+    g = torch.Generator().manual_seed(seed + 7)
+    return torch.randperm(size, generator=g).tolist()[: batch_size * batches]
+
+
 class Validator:
     """Mean loss over a fixed subset of held-out pairs, in eval mode (no dropout, BN running
     statistics, no augmentation), without touching any random generator."""
 
     def __init__(self, dataset: SampleDataset, batch_size: int, batches: int, seed: int) -> None:
-        g = torch.Generator().manual_seed(seed + 7)
-        order = torch.randperm(len(dataset), generator=g).tolist()
-        chosen = order[: batch_size * batches]
+        chosen = validation_indices(len(dataset), batch_size, batches, seed)
         self.batches = [chosen[i : i + batch_size] for i in range(0, len(chosen), batch_size)]
         self.dataset = dataset
         self.samples = len(chosen)
@@ -444,6 +448,13 @@ def run_training(request: TrainRequest) -> TrainOutcome:
     if recipe.model.freeze_backbone:
         assert isinstance(dataset, AwdaPairDataset | TosviDataset)
         dataset = with_cached_features(dataset, recipe, request.progress)
+        if isinstance(val_dataset, TosviDataset):
+            # only the stacks the validator reads are encoded, not every frame of the validation
+            # episodes (the validator then reads all of them: the same samples, the same mean)
+            v = recipe.train
+            val_dataset = val_dataset.subset(
+                validation_indices(len(val_dataset), v.batch_size, v.validation_batches, v.seed)
+            )
         if isinstance(val_dataset, AwdaPairDataset | TosviDataset):
             val_dataset = with_cached_features(val_dataset, recipe, request.progress)
     train_set: SampleDataset = dataset
