@@ -93,11 +93,11 @@ class Costs:
     """Per step of a frozen-backbone recipe over cached features (``small``: 0.5-0.6 s alone,
     0.75-0.84 s beside another job; batch 16, 2 threads, 2026-12-02)."""
     frozen_tosvi_step_s: dict[str, float] = field(
-        default_factory=lambda: {"tosvi": 5.5, "tosvi-depth": 14.0}
+        default_factory=lambda: {"tosvi": 5.3, "tosvi-depth": 10.7}
     )
     """Per T-OSVI step over cached maps pooled 2x2 (``small``: batch 16, 1 thread at nice 19
-    beside a 2-thread job: tosvi 4.9-6.2 s, tosvi-depth 11.3-16.8 s, whose depth ResNet-18 is
-    trained over 96 wrist depth images a step; 2026-12-02)."""
+    beside a 2-thread job, median of 20 steps on pick-place task 0; tosvi-depth trains its depth
+    ResNet-18 over 96 wrist depth images a step; 2026-12-02)."""
     agent_episode_steps: float = 62.4
     """Mean steps of a kept pick-place agent episode (T-OSVI caches every agent frame; the
     20-per-task train split: 17,472 steps in 280 episodes)."""

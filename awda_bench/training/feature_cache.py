@@ -25,7 +25,7 @@ when it opens the cache: a damaged file (truncated, flipped bytes, missing episo
 then, reported on one line, deleted and rebuilt, never read as data.
 
 Size (float16): a 240x320 frame's stride-16 EfficientNet-Lite0 map (112 x 15 x 20) is 67 KB;
-T-OSVI's 2x2-pooled map (112 x 8 x 10) 18 KB, 18.9 MB per 1,000 frames on disk (measured).
+T-OSVI's 2x2-pooled map (112 x 8 x 10) 18 KB, 18.5 MB per 1,000 frames on disk (measured).
 """
 
 from __future__ import annotations
