@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -119,6 +120,24 @@ def test_the_policy_path_equals_the_full_heads_and_refuses_training_mode(depth: 
     torch.testing.assert_close(got, want, atol=1e-5, rtol=1e-5)
     with pytest.raises(UsageError, match="eval mode"):
         net.train().policy_from_frames(maps)
+
+
+def test_a_run_recorded_before_tosvi_feature_pool_existed_still_resumes() -> None:
+    from awda_bench.training.recipe import load_recipe
+    from awda_bench.training.run import identity
+
+    recipe = load_recipe("small").to_dict()
+    column = {"slug": "tosvi", "arch": "tosvi"}
+    record = {"column": column, "recipe": recipe, "data": {"fingerprint": "f"}, "hold_out": None}
+    older = json.loads(json.dumps(record))
+    del older["recipe"]["model"]["tosvi_feature_pool"]  # counts as the default, 1
+    assert identity(older) != identity(record)  # small pools T-OSVI's maps by 2
+    record["recipe"]["model"]["tosvi_feature_pool"] = 1
+    assert identity(older) == identity(record)
+    # an AWDA run started before the field existed resumes under today's small (pool 2)
+    awda = {**record, "column": {"slug": "awda", "arch": "awda"}, "recipe": recipe}
+    awda["recipe"]["model"]["tosvi_feature_pool"] = 2
+    assert identity({**older, "column": awda["column"]}) == identity(awda)
 
 
 def test_frozen_backbone_gets_no_gradient_and_no_optimizer_state_depth_resnet_does(

@@ -134,6 +134,16 @@ class ModelRecipe:
         )
 
 
+TOSVI_ONLY_FIELDS: tuple[str, ...] = (
+    "frame_stack",
+    "mixture_components",
+    "tosvi_feature_pool",
+    "depth_height_px",
+    "depth_width_px",
+)
+"""``[model]`` fields only T-OSVI networks read (an AWDA run resumes whatever they say)."""
+
+
 @dataclass(frozen=True)
 class TrainRecipe:
     """The loop's schedule (the ``[train]`` table)."""

@@ -42,6 +42,7 @@ from awda_bench.models.config import (
     TosviConfig,
     TrainConfig,
     TrunkConfig,
+    config_to_dict,
 )
 from awda_bench.models.frame_encoder import build_frame_encoder
 from awda_bench.models.tosvi_net import TosviNet, pool_feature_maps
@@ -56,7 +57,14 @@ from awda_bench.training.feature_datasets import (
 )
 from awda_bench.training.logbook import Logbook, plot_learning_curve
 from awda_bench.training.loop import SampleDataset, TrainResult, resolve_device, train
-from awda_bench.training.recipe import Recipe, load_recipe
+from awda_bench.training.recipe import (
+    TOSVI_ONLY_FIELDS,
+    AugmentRecipe,
+    ModelRecipe,
+    Recipe,
+    TrainRecipe,
+    load_recipe,
+)
 
 TRAIN_JSON = "train.json"
 """What a checkpoint directory trains (column, recipe, data, hold-out)."""
@@ -172,8 +180,15 @@ def check_hold_out(data: CollectedData, family: str) -> None:
 
 
 def identity(record: dict[str, Any]) -> dict[str, Any]:
-    """The part of a ``train.json`` record that must match to resume (schedule excluded)."""
+    """The part of a ``train.json`` record that must match to resume (schedule excluded). A recipe
+    field added after the run started (absent from its record) counts at its default, which is
+    what the run trained with; an AWDA column ignores the T-OSVI-only fields."""
     recipe = json.loads(json.dumps(record["recipe"]))
+    for table, cls in (("model", ModelRecipe), ("train", TrainRecipe), ("augment", AugmentRecipe)):
+        recipe[table] = {**config_to_dict(cls()), **recipe.get(table, {})}
+    if record["column"].get("arch") == "awda":
+        for key in TOSVI_ONLY_FIELDS:
+            recipe["model"].pop(key)
     for key in _SCHEDULE_KEYS:
         recipe["train"].pop(key, None)
     return {
