@@ -92,6 +92,15 @@ class Costs:
     frozen_step_s: float = 0.8
     """Per step of a frozen-backbone recipe over cached features (``small``: 0.5-0.6 s alone,
     0.75-0.84 s beside another job; batch 16, 2 threads, 2026-12-02)."""
+    frozen_tosvi_step_s: dict[str, float] = field(
+        default_factory=lambda: {"tosvi": 5.3, "tosvi-depth": 10.7}
+    )
+    """Per T-OSVI step over cached maps pooled 2x2 (``small``: batch 16, 1 thread at nice 19
+    beside a 2-thread job, median of 20 steps on pick-place task 0; tosvi-depth trains its depth
+    ResNet-18 over 96 wrist depth images a step; 2026-12-02)."""
+    agent_episode_steps: float = 62.4
+    """Mean steps of a kept pick-place agent episode (T-OSVI caches every agent frame; the
+    20-per-task train split: 17,472 steps in 280 episodes)."""
     encode_frame_s: float = 0.077
     """Encoding one 240x320 frame into the feature cache (5,080 frames in ~6.5 min, busy)."""
     paper_step_factor: float = 32.0
@@ -347,12 +356,6 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
     from awda_bench.training.recipe import load_recipe
 
     frozen = load_recipe(config.recipe).model.freeze_backbone
-    not_cached = [k for k in config.columns if frozen and COLUMN_KEYS[k].arch != "awda"]
-    if not_cached:
-        raise UsageError(
-            f"recipe {config.recipe!r} trains over cached frozen-backbone features, which only "
-            f"AWDA columns have so far; run {', '.join(not_cached)} with --recipe small-scratch"
-        )
     factor = COSTS.paper_step_factor if config.recipe == "paper" else 1.0
     tasks, units = _eval_tasks(config.suite, config.hold_out)
     episodes = config.episodes if config.episodes is not None else suite.episodes_per_task
@@ -380,6 +383,10 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
                 # synthesized one
                 pairs = (n_train - config.synthesize) / 2
                 encode_s = COSTS.encode_frame_s * (pairs * 11 + config.synthesize * 10)
+        elif frozen:  # T-OSVI over cached (pooled) maps: every agent frame is encoded once
+            step_s = COSTS.frozen_tosvi_step_s[column.arch]
+            pairs = (n_train - config.synthesize) / 2  # counted only before the first step
+            encode_s = COSTS.encode_frame_s * pairs * (COSTS.agent_episode_steps + 10)
         steps_done = _steps_done(ckpt)
         stages.append(
             Stage(

@@ -49,12 +49,12 @@ def test_dry_run_prints_the_plan_and_writes_nothing(tmp_path: Path, capsys) -> N
     ):  # fmt: skip
         assert stage in text
     assert "760 episodes" in text and "estimated total for what is left" in text
-    # the default recipe (small) freezes its backbone: Full-1 alone, T-OSVI refused up front
+    # the default recipe (small) freezes its backbone: Full-1 alone unless T-OSVI is named
     assert main(argv) == 0
     text = capsys.readouterr().out
     assert "recipe small, columns full-1 ->" in text and "train tosvi" not in text
-    assert main([*argv, "--columns", "full-1,tosvi"]) == 2
-    assert "--recipe small-scratch" in capsys.readouterr().err
+    assert main([*argv, "--columns", "full-1,tosvi"]) == 0
+    assert "train tosvi" in capsys.readouterr().out
     assert not out.exists()
 
 

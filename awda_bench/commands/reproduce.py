@@ -36,7 +36,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         default=None,
         help=f"comma-separated Table S3 columns among {', '.join(COLUMN_KEYS)} "
         f"(default {','.join(DEFAULT_COLUMNS)}; full-1 alone with a frozen-backbone recipe such "
-        "as small, whose cached features only AWDA columns have so far)",
+        "as small: T-OSVI caches every agent frame and its steps cost seconds there, so name "
+        "tosvi to add it)",
     )
     parser.add_argument(
         "--hold-out", default=None, metavar="FAMILY", help="MOSAIC: the held-out family"

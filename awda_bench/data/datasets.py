@@ -35,6 +35,7 @@ each open their own handles).
 
 from __future__ import annotations
 
+import copy
 import os
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -374,9 +375,34 @@ class TosviDataset:
     def __len__(self) -> int:
         return len(self.samples)
 
+    def subset(self, indices: Iterable[int]) -> TosviDataset:
+        """This dataset reduced to the samples at ``indices``, in that order."""
+        reduced = copy.copy(self)
+        reduced.samples = [self.samples[i] for i in indices]
+        if not reduced.samples:
+            raise UsageError("a T-OSVI subset needs at least one sample")
+        return reduced
+
+    def stack_indices(self, t: int) -> np.ndarray:
+        """The state indices of step ``t``'s agent stack: ``t-5 .. t``, those below 0 at 0."""
+        return np.clip(np.arange(t - self.frame_stack + 1, t + 1), 0, None)
+
+    def depth_stack(self, agent: EpisodeRef, stack: np.ndarray) -> torch.Tensor:
+        """Wrist depth ``(len(stack), 1, Hd, Wd)`` [m] at ``stack``, nearest-resized to
+        ``depth_size``."""
+        depth = self.data.depth_m(agent, stack)[..., 0]  # (S, Hd, Wd)
+        if self.depth_size is not None and tuple(depth.shape[1:]) != tuple(self.depth_size):
+            import cv2
+
+            h, w = self.depth_size
+            depth = np.stack(
+                [cv2.resize(d, (w, h), interpolation=cv2.INTER_NEAREST) for d in depth]
+            )
+        return torch.from_numpy(np.ascontiguousarray(depth))[:, None]
+
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
         agent, demo, t = self.samples[index]
-        stack = np.clip(np.arange(t - self.frame_stack + 1, t + 1), 0, None)
+        stack = self.stack_indices(t)
         sample = {
             "demo": frames_tensor(
                 self.data.frames(demo, demo_frame_indices(demo.steps, self.demo_frames)),
@@ -386,13 +412,5 @@ class TosviDataset:
             "actions": torch.from_numpy(self.data.actions(agent)[stack]),
         }
         if self.with_depth:
-            depth = self.data.depth_m(agent, stack)[..., 0]  # (S, Hd, Wd)
-            if self.depth_size is not None and tuple(depth.shape[1:]) != tuple(self.depth_size):
-                import cv2
-
-                h, w = self.depth_size
-                depth = np.stack(
-                    [cv2.resize(d, (w, h), interpolation=cv2.INTER_NEAREST) for d in depth]
-                )
-            sample["depth"] = torch.from_numpy(np.ascontiguousarray(depth))[:, None]
+            sample["depth"] = self.depth_stack(agent, stack)
         return sample

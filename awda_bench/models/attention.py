@@ -13,6 +13,8 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
+from awda_bench.errors import UsageError
+
 
 def sinusoidal_encoding(
     length: int, channels: int, device: torch.device, dtype: torch.dtype
@@ -46,6 +48,10 @@ class SelfAttention3d(nn.Module):
     residual and ``BatchNorm3d``::
 
         y = BatchNorm3d(x + Dropout(W_o * Attention(W_q x, W_k x, W_v x)))
+
+    ``queries_from = s`` computes ``y`` for the frames ``t >= s`` only (their tokens query all
+    ``T*h*w`` keys): what a last layer costs when only the last frames' outputs are read. Exact in
+    eval mode only (in training, BatchNorm's batch statistics would cover the queried tokens alone).
     """
 
     def __init__(self, channels: int, heads: int, head_dim: int, dropout: float) -> None:
@@ -65,16 +71,21 @@ class SelfAttention3d(nn.Module):
         # (B, heads*d, T, h, w) -> (B, heads, L, d)
         return x.reshape(b, self.heads, self.head_dim, -1).transpose(2, 3)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
+    def forward(self, x: torch.Tensor, queries_from: int = 0) -> torch.Tensor:
+        """``(B, C, T, h, w)`` -> ``(B, C, T - queries_from, h, w)``."""
+        if queries_from and self.training:
+            raise UsageError("SelfAttention3d(queries_from > 0) is exact in eval mode only")
         b, _, t, h, w = x.shape
+        kept = x[:, :, queries_from:]
         q, k, v = (
-            self._tokens(self.query(x)),
+            self._tokens(self.query(kept)),
             self._tokens(self.key(x)),
             self._tokens(self.value(x)),
         )
-        attended = F.scaled_dot_product_attention(q, k, v)  # (B, heads, L, d)
-        attended = attended.transpose(2, 3).reshape(b, self.heads * self.head_dim, t, h, w)
-        return self.norm(x + self.dropout(self.output(attended)))
+        attended = F.scaled_dot_product_attention(q, k, v)  # (B, heads, L', d)
+        shape = (b, self.heads * self.head_dim, t - queries_from, h, w)
+        attended = attended.transpose(2, 3).reshape(shape)
+        return self.norm(kept + self.dropout(self.output(attended)))
 
 
 class SpatialSoftmax(nn.Module):

@@ -253,6 +253,12 @@ class TosviConfig:
     """Hidden width of the action and inverse-model MLPs."""
     inverse_loss_weight: float = 1.0
     """Weight of the inverse-model NLL (a_i from frames i, i+1) added to the policy NLL."""
+    feature_pool: int = 1
+    """Average-pool the backbone's feature map by this factor (``ceil_mode``: a partial window
+    at the edge averages the cells it covers) before the attention layers; 1 keeps it. The
+    ``small`` recipe's frozen EfficientNet-Lite0 stage (stride 16, 15x20 cells at 240x320) pooled
+    by 2 gives the reference trunk's 8x10 cells (ResNet-18, stride 32): attention over 16 frames x
+    80 cells instead of 16 x 300 (a deviation from the reference, whose cells are not pooled)."""
     use_depth: bool = False
     """``+depth`` variant: a second ResNet-18 on the wrist depth image, fused before attention."""
     depth_height_px: int = 128
@@ -266,6 +272,7 @@ class TosviConfig:
         o = "TosviConfig"
         _check(self.frame_stack >= 2, o, "frame_stack", self.frame_stack, "an int >= 2")
         _check(self.action_dim >= 1, o, "action_dim", self.action_dim, "an int >= 1")
+        _check(self.feature_pool >= 1, o, "feature_pool", self.feature_pool, "an int >= 1")
         _check(
             self.mixture_components >= 1,
             o,

@@ -19,6 +19,17 @@ Batch format (images RGB float in [0, 1], channels first; actions in [-1, 1])::
     "actions": (B, frame_stack, 4)                a_i taken at frame i: a_t is the policy target,
                                                   a_{t-5} .. a_{t-1} the inverse-model targets
     "depth":   (B, frame_stack, 1, Hd, Wd) [m]    only with use_depth
+
+With a frozen backbone, training batches carry its cached (pooled) feature maps instead of the
+images, ``"demo_features" (B, demo_frames, C, h, w)`` and ``"frame_features" (B, frame_stack, C,
+h, w)``: what :meth:`TosviNet.frame_features` returns, the same at evaluation. ``+depth`` keeps its
+depth ResNet trainable (it is not the frozen RGB trunk), so ``"depth"`` stays raw depth images.
+
+``feature_pool`` > 1 average-pools every frame's backbone map before the attention layers
+(:func:`pool_feature_maps`)::
+
+    frame (3, H, W) -> backbone (frozen or not) -> (C, h, w) -> pool f x f -> (C, ceil(h/f),
+    ceil(w/f)) -> [+ depth fusion] -> space-time attention over all frames -> spatial softmax
 """
 
 from __future__ import annotations
@@ -27,6 +38,7 @@ import math
 from typing import TYPE_CHECKING
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from awda_bench.errors import UnknownChoiceError, UsageError
@@ -41,6 +53,17 @@ if TYPE_CHECKING:
 
 def _mlp(inputs: int, hidden: int, outputs: int) -> nn.Sequential:
     return nn.Sequential(nn.Linear(inputs, hidden), nn.ReLU(), nn.Linear(hidden, outputs))
+
+
+def pool_feature_maps(maps: torch.Tensor, factor: int) -> torch.Tensor:
+    """``(..., C, h, w)`` -> ``(..., C, ceil(h / factor), ceil(w / factor))``: the mean over each
+    ``factor x factor`` window (an edge window averages the cells it covers); 1 returns ``maps``."""
+    if factor == 1:
+        return maps
+    lead = maps.shape[:-3]
+    flat = maps.reshape(-1, *maps.shape[-3:])
+    pooled = F.avg_pool2d(flat, factor, factor, ceil_mode=True)
+    return pooled.reshape(*lead, *pooled.shape[1:])
 
 
 def _init_mixture_output(layer: nn.Module, config: TosviConfig) -> None:
@@ -128,31 +151,73 @@ class TosviNet(nn.Module):
         depth_maps = self.depth_backbone(scaled.reshape(b * s, *depth.shape[2:]))
         return depth_maps.mean(dim=(-2, -1)).view(b, s, FEATURE_CHANNELS)
 
-    def _fuse_depth(self, features: torch.Tensor, depth_vec: torch.Tensor) -> torch.Tensor:
-        """RGB features ``(B, T, C, h, w)`` + agent depth vectors ``(B, S, 512)`` -> fused."""
+    def fuse_depth(self, features: torch.Tensor, depth_vectors: torch.Tensor) -> torch.Tensor:
+        """Frames' maps ``(B, T, C, h, w)`` + one depth vector per frame ``(B, T, 512)`` (zeros
+        for demo frames) -> fused maps ``(B, T, C, h, w)``; frame by frame, so a closed-loop
+        policy fuses each frame once."""
         assert self.depth_fusion is not None
         b, t, c, h, w = features.shape
-        s, d = depth_vec.shape[1:]
-        demo_zeros = depth_vec.new_zeros(b, t - s, d)
-        per_frame = torch.cat((demo_zeros, depth_vec), dim=1)  # (B, T, 512)
-        stacked = torch.cat((features, per_frame[..., None, None].expand(-1, -1, -1, h, w)), dim=2)
+        d = depth_vectors.shape[-1]
+        tiled = depth_vectors[..., None, None].expand(-1, -1, -1, h, w)
+        stacked = torch.cat((features, tiled), dim=2)
         fused = self.depth_fusion(stacked.reshape(b * t, c + d, h, w))
         return fused.view(b, t, c, h, w)
+
+    def _fuse_depth(self, features: torch.Tensor, depth_vec: torch.Tensor) -> torch.Tensor:
+        """RGB features ``(B, T, C, h, w)`` + agent depth vectors ``(B, S, 512)`` -> fused."""
+        b, t = features.shape[:2]
+        s, d = depth_vec.shape[1:]
+        demo_zeros = depth_vec.new_zeros(b, t - s, d)
+        return self.fuse_depth(features, torch.cat((demo_zeros, depth_vec), dim=1))
+
+    def frame_features(self, frames: torch.Tensor) -> torch.Tensor:
+        """``(B, T, 3, H, W)`` RGB in [0, 1] -> each frame's (pooled) backbone map ``(B, T, C, h,
+        w)``: what a frozen backbone's feature cache holds, and what a closed-loop policy keeps
+        per frame (each frame's map depends on that frame alone)."""
+        return pool_feature_maps(self.trunk.frame_features(frames), self.config.feature_pool)
 
     def forward(
         self, demo: torch.Tensor, frames: torch.Tensor, depth: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Mixture parameters: policy ``(B, A, 3M)`` for a_t, inverse ``(B, S-1, A, 3M)``."""
         self._check_inputs(demo, frames, depth)
-        features = self.trunk.frame_features(torch.cat((demo, frames), dim=1))
+        features = self.frame_features(torch.cat((demo, frames), dim=1))
         vectors = self.depth_vectors(depth) if depth is not None and self.config.use_depth else None
         return self.heads_from_features(features, vectors)
+
+    def forward_features(
+        self,
+        demo_features: torch.Tensor,
+        frame_features: torch.Tensor,
+        depth: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """:meth:`forward` from :meth:`frame_features`' maps (a frozen backbone's cache):
+        ``demo_features (B, demo_frames, C, h, w)``, ``frame_features (B, frame_stack, C, h, w)``
+        and, for +depth, the raw ``depth (B, frame_stack, 1, Hd, Wd)`` [m]."""
+        cfg = self.config
+        b = demo_features.shape[0]
+        if (
+            demo_features.dim() != 5
+            or frame_features.dim() != 5
+            or demo_features.shape[1] != cfg.trunk.demo_frames
+            or frame_features.shape[:2] != (b, cfg.frame_stack)
+            or demo_features.shape[2:] != frame_features.shape[2:]
+        ):
+            raise UsageError(
+                f"feature maps must be demo (B, {cfg.trunk.demo_frames}, C, h, w) and frames "
+                f"(B, {cfg.frame_stack}, C, h, w); got {tuple(demo_features.shape)} and "
+                f"{tuple(frame_features.shape)}"
+            )
+        if cfg.use_depth and depth is None:
+            raise UsageError("a T-OSVI +depth model needs the wrist depth stack")
+        vectors = self.depth_vectors(depth) if depth is not None and cfg.use_depth else None
+        return self.heads_from_features(torch.cat((demo_features, frame_features), 1), vectors)
 
     def heads_from_features(
         self, features: torch.Tensor, depth_vectors: torch.Tensor | None = None
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """The part of :meth:`forward` after the per-frame ResNets: ``features`` ``(B, demo_frames +
-        frame_stack, 512, h, w)`` from ``trunk.frame_features`` and, for +depth, ``depth_vectors``
+        frame_stack, C, h, w)`` from :meth:`frame_features` and, for +depth, ``depth_vectors``
         ``(B, frame_stack, 512)`` from :meth:`depth_vectors`. Each frame's features depend on that
         frame alone, so a closed-loop policy computes each frame's once and keeps them."""
         cfg = self.config
@@ -167,6 +232,17 @@ class TosviNet(nn.Module):
         inverse = self.inverse_head(pairs).view(b, s - 1, cfg.action_dim, -1)
         return policy, inverse
 
+    def policy_from_frames(self, frames: torch.Tensor) -> torch.Tensor:
+        """Eval mode: the policy mixture ``(B, A, 3M)`` for a_t from every frame's attention input
+        ``(B, demo_frames + frame_stack, C, h, w)`` (:meth:`frame_features`; for +depth then
+        :meth:`fuse_depth`, demo frames with zero vectors). The same values as
+        :meth:`heads_from_features`' policy, at about half its cost: the last attention layer
+        queries with a_t's frame alone and the inverse head is skipped."""
+        if self.training:
+            raise UsageError("TosviNet.policy_from_frames is for eval mode (model.eval())")
+        vector = self.trunk.temporal(frames, last_frames=1)[:, 0]
+        return self.policy_head(vector).view(frames.shape[0], self.config.action_dim, -1)
+
     def distribution(self, params: torch.Tensor) -> DiscretizedLogisticMixture:
         return DiscretizedLogisticMixture(params, bins=self.config.action_bins)
 
@@ -177,7 +253,12 @@ class TosviNet(nn.Module):
 
         NLLs are summed over action dimensions and averaged over samples (and pairs) [nats].
         """
-        policy, inverse = self(batch["demo"], batch["frames"], batch.get("depth"))
+        if "demo_features" in batch:  # a frozen backbone's cached features
+            policy, inverse = self.forward_features(
+                batch["demo_features"], batch["frame_features"], batch.get("depth")
+            )
+        else:
+            policy, inverse = self(batch["demo"], batch["frames"], batch.get("depth"))
         actions = batch["actions"]
         policy_nll = -self.distribution(policy).log_prob(actions[:, -1]).sum(-1).mean()
         inverse_nll = -self.distribution(inverse).log_prob(actions[:, :-1]).sum(-1).mean()

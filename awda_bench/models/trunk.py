@@ -78,12 +78,20 @@ class VisualTrunk(nn.Module):
             features = self.backbone(self.normalize(flat))
         return features.reshape(b, t, *features.shape[1:])
 
-    def temporal(self, features: torch.Tensor) -> torch.Tensor:
+    def temporal(self, features: torch.Tensor, last_frames: int | None = None) -> torch.Tensor:
         """``(B, T, C, h, w)`` -> per-frame vectors ``(B, T, feature_dim)`` (``self-attention``
-        head only; the cell heads read the feature maps themselves)."""
-        volume = features.permute(0, 2, 1, 3, 4)  # (B, C, T, h, w)
-        volume = self.attention(self.positional(volume))
-        return self.mlp(self.spatial_softmax(volume))
+        head only; the cell heads read the feature maps themselves). ``last_frames = n`` (eval
+        mode): the vectors of the last ``n`` frames only ``(B, n, feature_dim)``, the same values,
+        the last attention layer querying with those frames' tokens alone."""
+        volume = self.positional(features.permute(0, 2, 1, 3, 4))  # (B, C, T, h, w)
+        if last_frames is None or not len(self.attention):
+            volume = self.attention(volume)
+        else:
+            for layer in self.attention[:-1]:
+                volume = layer(volume)
+            volume = self.attention[-1](volume, queries_from=volume.shape[2] - last_frames)
+        vectors = self.mlp(self.spatial_softmax(volume))
+        return vectors if last_frames is None else vectors[:, -last_frames:]
 
     def forward(self, frames: torch.Tensor) -> torch.Tensor:
         """``(B, T, 3, H, W)`` RGB in [0, 1] -> ``(B, T, feature_dim)``."""

@@ -2,19 +2,23 @@
 
 Per episode (SPEC §6; the AWDA paper's evaluator for the baseline)::
 
-    demo video (demonstrator, other layout) --10 frames--> ResNet features, once per episode
-    every step t:  third-person frame o_t --> ResNet features (+ wrist depth d_t --> depth ResNet
-                   vector, for +depth)
+    demo video (demonstrator, other layout) --10 frames--> backbone maps, once per episode
+    every step t:  third-person frame o_t --> backbone map (pooled by ``feature_pool``; + wrist
+                   depth d_t --> depth ResNet vector, for +depth)
                    [demo features, features of o_{t-5} .. o_t (+ depth vectors)] --> attention
                    --> action mixture
                    a_t = sample | mean | mode of the mixture; gripper command binarized (+1 / -1)
 
 The agent stack is a sliding window of the last ``frame_stack`` frames; at the start of an episode
 the missing older frames repeat the first one, exactly as the training samples do
-(:class:`~awda_bench.data.datasets.TosviDataset`). The ResNet sees each frame on its own (frozen
-BatchNorm statistics in eval mode), and so does +depth's depth ResNet, so each frame's features
-are computed once and kept: a step costs one frame through the ResNet(s) plus the fusion and
-attention layers, not sixteen RGB and six depth frames.
+(:class:`~awda_bench.data.datasets.TosviDataset`). The backbone sees each frame on its own (frozen
+BatchNorm statistics in eval mode), and so do +depth's depth ResNet and its 1x1 fusion, so each
+frame's attention input is computed once and kept (the demo's once per episode): a step costs one
+frame through the backbone (and depth ResNet and fusion) plus the attention layers, not sixteen
+RGB and six depth frames; and since only a_t is read, the last attention layer queries with o_t's
+tokens alone (``TosviNet.policy_from_frames``, exact in eval mode). A snapshot trained on a
+frozen backbone's cached features carries that backbone (its weights are in the snapshot), so
+evaluation encodes live frames with exactly the trunk whose features training read.
 
 Frames are rendered by the harness camera (the suite's size) and area-downscaled to the snapshot's
 input size with OpenCV, as the ``train`` loader downscales the collected frames. The network only
@@ -100,7 +104,7 @@ class TosviPolicy:
         self._observations: Observations | None = None
         self._demo_features: Any = None
         self._frames: deque[Any] = deque(maxlen=self.frame_stack)
-        self._depths: deque[Any] = deque(maxlen=self.frame_stack)
+        """The attention inputs of o_{t-5} .. o_t (+depth: already fused with their depth)."""
         self.inference_s = 0.0
         """Wall time of this episode's forward passes [s] (rendering excluded)."""
         self.steps = 0
@@ -117,15 +121,20 @@ class TosviPolicy:
     def reset(self, ctx: EpisodeContext) -> None:
         import torch
 
+        from awda_bench.models.backbone import FEATURE_CHANNELS  # the depth vectors' length
+
         observations = observations_of(ctx)
         self._observations = observations
         demo = observations.demo_frames(self.model.config.trunk.demo_frames)
         start = time.perf_counter()
         with torch.no_grad():
-            self._demo_features = self.model.trunk.frame_features(self._to_tensor(np.asarray(demo)))
+            maps = self.model.frame_features(self._to_tensor(np.asarray(demo)))
+            if self.use_depth:  # demo frames have no depth: fused with zero vectors, once
+                zeros = maps.new_zeros(*maps.shape[:2], FEATURE_CHANNELS)
+                maps = self.model.fuse_depth(maps, zeros)
+            self._demo_features = maps
         self.inference_s = time.perf_counter() - start
         self._frames.clear()
-        self._depths.clear()
         self.steps = 0
 
     def _observe(self) -> None:
@@ -140,17 +149,15 @@ class TosviPolicy:
             depth_m = _resize(self._observations.wrist_depth().depth_m[0], h, w, nearest=True)
         start = time.perf_counter()
         with torch.no_grad():
-            features = self.model.trunk.frame_features(self._to_tensor(rgb[None]))[:, 0]
-            depth_vector = None
+            features = self.model.frame_features(self._to_tensor(rgb[None]))  # (1, 1, C, h, w)
             if depth_m is not None:
                 tensor = torch.from_numpy(depth_m.astype(np.float32)).to(self.device)
-                depth_vector = self.model.depth_vectors(tensor[None, None, None])[:, 0]  # (1, 512)
+                vector = self.model.depth_vectors(tensor[None, None, None])  # (1, 1, 512)
+                features = self.model.fuse_depth(features, vector)
         self.inference_s += time.perf_counter() - start
         copies = self.frame_stack if not self._frames else 1
         for _ in range(copies):
-            self._frames.append(features)
-            if depth_vector is not None:
-                self._depths.append(depth_vector)
+            self._frames.append(features[:, 0])
 
     def act(self, obs: Any) -> np.ndarray:
         import torch
@@ -161,8 +168,7 @@ class TosviPolicy:
         start = time.perf_counter()
         with torch.no_grad():
             features = torch.cat((self._demo_features, torch.stack(tuple(self._frames), 1)), 1)
-            depth = torch.stack(tuple(self._depths), 1) if self.use_depth else None  # (1, S, 512)
-            policy, _ = self.model.heads_from_features(features, depth)
+            policy = self.model.policy_from_frames(features)
             dist = self.model.distribution(policy)
             if self.action_select == "sample":
                 action = dist.sample()

@@ -19,9 +19,9 @@ Applied to training batches only (never validation), in this order, per sample `
   are the frame stack and the partner's first agent frame is the oldest frame of its stack.
 
 With a frozen backbone (batches of cached feature maps, ``"demo_features"`` and
-``"first_frame_features"``) there are no images to shift or jitter: only ADM applies, mixing
-the feature maps with the same rule (the backbone is not linear, so this is ADM in feature space,
-a deviation from the reference, which mixes images).
+``"first_frame_features"``, or T-OSVI's ``"frame_features"`` stack) there are no images to shift
+or jitter: only ADM applies, mixing the feature maps with the same rule (the backbone is not
+linear, so this is ADM in feature space, a deviation from the reference, which mixes images).
 
 All draws come from a generator seeded by ``(seed, step)``, so a resumed run (or any re-run)
 treats batch ``step`` identically and the global RNG is untouched.
@@ -38,6 +38,8 @@ from awda_bench.training.recipe import AugmentRecipe
 
 AGENT_KEYS: tuple[str, ...] = ("first_frame", "frames")
 """Batch keys holding agent frames (AWDA: ``first_frame``; T-OSVI: ``frames``)."""
+AGENT_FEATURE_KEYS: tuple[str, ...] = ("first_frame_features", "frame_features")
+"""The same, as cached feature maps (AWDA: ``(B, C, h, w)``; T-OSVI: ``(B, S, C, h, w)``)."""
 
 
 def step_generator(seed: int, step: int) -> torch.Generator:
@@ -130,13 +132,18 @@ class BatchTreatment:
         b = demo.shape[0]
         if not self.adm or b < 2:
             return batch
+        key = next(k for k in AGENT_FEATURE_KEYS if k in batch)
+        stack = key == "frame_features"
         a = self.augment
         g = step_generator(self.seed, step)
         lam = a.adm_lambda_low + (a.adm_lambda_high - a.adm_lambda_low) * torch.rand(b, generator=g)
-        mixed_demo, mixed_agent = asymmetric_demo_mixup(
-            demo, batch["first_frame_features"].unsqueeze(1), lam.to(demo.device)
-        )
-        return {**batch, "demo_features": mixed_demo, "first_frame_features": mixed_agent[:, 0]}
+        agent = batch[key] if stack else batch[key].unsqueeze(1)
+        mixed_demo, mixed_agent = asymmetric_demo_mixup(demo, agent, lam.to(demo.device))
+        return {
+            **batch,
+            "demo_features": mixed_demo,
+            key: mixed_agent if stack else mixed_agent[:, 0],
+        }
 
     def _shift(self, frames: torch.Tensor, g: torch.Generator, b: int) -> torch.Tensor:
         s = self.augment.shift_px

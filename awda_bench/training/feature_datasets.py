@@ -1,14 +1,25 @@
-"""AWDA pairs served from a frozen backbone's feature cache instead of images.
+"""Training datasets served from a frozen backbone's feature cache instead of images.
 
-:class:`CachedAwdaPairs` yields the same pairs, in the same order, as the
-:class:`~awda_bench.data.datasets.AwdaPairDataset` it wraps, with the images replaced by their
-cached feature maps (:mod:`awda_bench.training.feature_cache`)::
+Each wrapper yields the same samples, in the same order, as the dataset it wraps, with the images
+replaced by their cached feature maps (:mod:`awda_bench.training.feature_cache`), and names the
+frames it reads (``frames_needed``, ``tosvi_frames_needed``) so the cache encodes exactly those.
+
+:class:`CachedAwdaPairs` (:class:`~awda_bench.data.datasets.AwdaPairDataset`)::
 
     "demo_features"        (demo_frames, C, h, w) float32
     "first_frame_features" (C, h, w) float32
     "trajectory", "demo_trajectory", "head"   as AwdaPairDataset
 
-Labels are read once and kept in memory (the episode files are not touched again).
+:class:`CachedTosviSamples` (:class:`~awda_bench.data.datasets.TosviDataset`)::
+
+    "demo_features"  (demo_frames, C, h, w) float32
+    "frame_features" (frame_stack, C, h, w) float32   agent frames t-5 .. t (below 0: frame 0)
+    "actions"        (frame_stack, 4)                  as TosviDataset
+    "depth"          (frame_stack, 1, Hd, Wd) [m]      as TosviDataset (+depth: its depth ResNet
+                                                       is trained, so depth stays images, read
+                                                       from the episode files per sample)
+
+Labels (trajectories, actions) are read once and kept in memory.
 """
 
 from __future__ import annotations
@@ -16,7 +27,12 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from awda_bench.data.datasets import AwdaPairDataset, EpisodeRef, demo_frame_indices
+from awda_bench.data.datasets import (
+    AwdaPairDataset,
+    EpisodeRef,
+    TosviDataset,
+    demo_frame_indices,
+)
 from awda_bench.training.feature_cache import FeatureCache, episode_name
 
 
@@ -65,3 +81,54 @@ class CachedAwdaPairs:
             "demo_trajectory": self._labels[_key(demo)],
             "head": torch.tensor(head, dtype=torch.int64),
         }
+
+
+def tosvi_frames_needed(samples: TosviDataset) -> list[tuple[EpisodeRef, np.ndarray]]:
+    """Every episode the T-OSVI samples read, with the sorted state indices they read of it: the
+    agent stacks of every sample (all steps of an episode: states 0 .. T-1; state T, after the
+    last action, is in no stack); a demonstrator's demo frames; both for self-paired synthesized
+    episodes."""
+    refs: dict[tuple[str, str], EpisodeRef] = {}
+    needed: dict[tuple[str, str], set[int]] = {}
+    demos_done: set[tuple[str, str]] = set()
+    for agent, demo, t in samples.samples:
+        key = _key(agent)
+        refs[key] = agent
+        needed.setdefault(key, set()).update(int(i) for i in samples.stack_indices(t))
+        key = _key(demo)
+        if key not in demos_done:
+            demos_done.add(key)
+            refs[key] = demo
+            idx = demo_frame_indices(demo.steps, samples.demo_frames)
+            needed.setdefault(key, set()).update(int(i) for i in idx)
+    return [(refs[k], np.array(sorted(v), dtype=np.int64)) for k, v in needed.items()]
+
+
+class CachedTosviSamples:
+    """``samples`` with feature maps from ``cache`` (module docstring)."""
+
+    def __init__(self, samples: TosviDataset, cache: FeatureCache) -> None:
+        self.samples = samples
+        self.cache = cache
+        root = samples.data
+        self._names = {
+            _key(ref): episode_name(root, ref) for ref, _ in tosvi_frames_needed(samples)
+        }
+        agents = {_key(agent): agent for agent, _, _ in samples.samples}
+        self._actions = {k: torch.from_numpy(root.actions(ref)) for k, ref in agents.items()}
+
+    def __len__(self) -> int:
+        return len(self.samples)
+
+    def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
+        agent, demo, t = self.samples.samples[index]
+        stack = self.samples.stack_indices(t)
+        demo_idx = demo_frame_indices(demo.steps, self.samples.demo_frames)
+        sample = {
+            "demo_features": self.cache.features(self._names[_key(demo)], demo_idx),
+            "frame_features": self.cache.features(self._names[_key(agent)], stack),
+            "actions": self._actions[_key(agent)][torch.from_numpy(stack)],
+        }
+        if self.samples.with_depth:
+            sample["depth"] = self.samples.depth_stack(agent, stack)
+        return sample

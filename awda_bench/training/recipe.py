@@ -16,7 +16,8 @@ Layout::
               backbone_stride,
               freeze_backbone, backbone_weights, head, demo_reference_frame,
               identification_weight, points_per_segment, gamma, attribute_scale, trajectory_points,
-              frame_stack, mixture_components, depth_height_px, depth_width_px
+              frame_stack, mixture_components, tosvi_feature_pool, depth_height_px,
+              depth_width_px
     [train]   batch_size, learning_rate, max_steps, snapshot_every_steps,
               validate_every_steps, validation_batches, seed
     [augment] adm_lambda_low, adm_lambda_high, shift_px, brightness, contrast, saturation
@@ -74,7 +75,8 @@ class ModelRecipe:
     efficientnet-lite0: 8, 16 or 32)."""
     freeze_backbone: bool = False
     """Frozen backbone: ``train`` encodes every frame once into a feature cache and trains the
-    rest over it (AWDA columns; shifts and colour jitter then do not apply, ADM mixes features)."""
+    rest over it (every column: T-OSVI's agent frames too; shifts and colour jitter then do not
+    apply, ADM mixes features)."""
     backbone_weights: str = "none"
     """``none`` (random init), ``imagenet`` (resnet18: torchvision's download, not possible
     offline; efficientnet-lite0: the installed package), or a path to a local ResNet-18
@@ -100,6 +102,9 @@ class ModelRecipe:
     """T-OSVI agent frames per sample (T-OSVI: 6)."""
     mixture_components: int = 3
     """T-OSVI logistic mixture components per action dimension."""
+    tosvi_feature_pool: int = 1
+    """T-OSVI only: average-pool each frame's backbone map by this factor before the attention
+    layers (``TosviConfig.feature_pool``; with a frozen backbone the cache holds the pooled maps)."""
     depth_height_px: int = 128
     """T-OSVI +depth wrist depth height [px]; the collection must have this depth size."""
     depth_width_px: int = 128
@@ -120,6 +125,23 @@ class ModelRecipe:
             "a float >= 0",
         )
         _need(self.frame_stack >= 2, o, "frame_stack", self.frame_stack, "an int >= 2")
+        _need(
+            self.tosvi_feature_pool >= 1,
+            o,
+            "tosvi_feature_pool",
+            self.tosvi_feature_pool,
+            "an int >= 1",
+        )
+
+
+TOSVI_ONLY_FIELDS: tuple[str, ...] = (
+    "frame_stack",
+    "mixture_components",
+    "tosvi_feature_pool",
+    "depth_height_px",
+    "depth_width_px",
+)
+"""``[model]`` fields only T-OSVI networks read (an AWDA run resumes whatever they say)."""
 
 
 @dataclass(frozen=True)

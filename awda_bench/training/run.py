@@ -42,15 +42,29 @@ from awda_bench.models.config import (
     TosviConfig,
     TrainConfig,
     TrunkConfig,
+    config_to_dict,
 )
-from awda_bench.models.tosvi_net import TosviNet
+from awda_bench.models.frame_encoder import frozen_encoder
+from awda_bench.models.tosvi_net import TosviNet, pool_feature_maps
 from awda_bench.training.augment import BatchTreatment
 from awda_bench.training.columns import Column, column_for
 from awda_bench.training.feature_cache import load_or_build
-from awda_bench.training.feature_datasets import CachedAwdaPairs, frames_needed
+from awda_bench.training.feature_datasets import (
+    CachedAwdaPairs,
+    CachedTosviSamples,
+    frames_needed,
+    tosvi_frames_needed,
+)
 from awda_bench.training.logbook import Logbook, plot_learning_curve
 from awda_bench.training.loop import SampleDataset, TrainResult, resolve_device, train
-from awda_bench.training.recipe import Recipe, load_recipe
+from awda_bench.training.recipe import (
+    TOSVI_ONLY_FIELDS,
+    AugmentRecipe,
+    ModelRecipe,
+    Recipe,
+    TrainRecipe,
+    load_recipe,
+)
 
 TRAIN_JSON = "train.json"
 """What a checkpoint directory trains (column, recipe, data, hold-out)."""
@@ -166,8 +180,15 @@ def check_hold_out(data: CollectedData, family: str) -> None:
 
 
 def identity(record: dict[str, Any]) -> dict[str, Any]:
-    """The part of a ``train.json`` record that must match to resume (schedule excluded)."""
+    """The part of a ``train.json`` record that must match to resume (schedule excluded). A recipe
+    field added after the run started (absent from its record) counts at its default, which is
+    what the run trained with; an AWDA column ignores the T-OSVI-only fields."""
     recipe = json.loads(json.dumps(record["recipe"]))
+    for table, cls in (("model", ModelRecipe), ("train", TrainRecipe), ("augment", AugmentRecipe)):
+        recipe[table] = {**config_to_dict(cls()), **recipe.get(table, {})}
+    if record["column"].get("arch") == "awda":
+        for key in TOSVI_ONLY_FIELDS:
+            recipe["model"].pop(key)
     for key in _SCHEDULE_KEYS:
         recipe["train"].pop(key, None)
     return {
@@ -276,6 +297,7 @@ def model_config(
         trunk=replace(trunk, head="self-attention"),  # T-OSVI reads every frame's keypoints
         frame_stack=m.frame_stack,
         mixture_components=m.mixture_components,
+        feature_pool=m.tosvi_feature_pool,
         use_depth=column.arch == "tosvi-depth",
         depth_height_px=m.depth_height_px,
         depth_width_px=m.depth_width_px,
@@ -316,12 +338,34 @@ def make_dataset(
     )
 
 
+def cache_variant(pool: int) -> str:
+    """The cache variant of backbone maps average-pooled by ``pool`` (1: the maps themselves,
+    the file AWDA's datasets read)."""
+    return "rgb" if pool == 1 else f"rgb-avgpool{pool}"
+
+
 def with_cached_features(
-    dataset: AwdaPairDataset, recipe: Recipe, column: Column, progress: bool
-) -> CachedAwdaPairs:
-    """``dataset`` served from the frozen backbone's feature cache (built first if needed)."""
+    dataset: AwdaPairDataset | TosviDataset, recipe: Recipe, progress: bool
+) -> CachedAwdaPairs | CachedTosviSamples:
+    """``dataset`` served from the frozen backbone's feature cache (built first if needed).
+    T-OSVI's maps are cached after its ``feature_pool`` (what ``TosviNet.frame_features``
+    returns), under their own variant when pooled."""
     trunk = trunk_config(recipe)
-    cache = load_or_build(dataset.data, trunk, frames_needed(dataset), progress=progress)
+    frozen = frozen_encoder(trunk)  # eval mode: what evaluation computes live
+    pool = recipe.model.tosvi_feature_pool if isinstance(dataset, TosviDataset) else 1
+
+    def encode(images: torch.Tensor) -> torch.Tensor:
+        return pool_feature_maps(frozen(images), pool)
+
+    if isinstance(dataset, TosviDataset):
+        needed = tosvi_frames_needed(dataset)
+    else:
+        needed = frames_needed(dataset)
+    cache = load_or_build(
+        dataset.data, trunk, needed, encode, variant=cache_variant(pool), progress=progress
+    )
+    if isinstance(dataset, TosviDataset):
+        return CachedTosviSamples(dataset, cache)
     return CachedAwdaPairs(dataset, cache)
 
 
@@ -341,14 +385,18 @@ class OneHead:
         return sample
 
 
+def validation_indices(size: int, batch_size: int, batches: int, seed: int) -> list[int]:
+    """The samples (of ``size``) a :class:`Validator` reads, in its order."""
+    g = torch.Generator().manual_seed(seed + 7)
+    return torch.randperm(size, generator=g).tolist()[: batch_size * batches]
+
+
 class Validator:
     """Mean loss over a fixed subset of held-out pairs, in eval mode (no dropout, BN running
     statistics, no augmentation), without touching any random generator."""
 
     def __init__(self, dataset: SampleDataset, batch_size: int, batches: int, seed: int) -> None:
-        g = torch.Generator().manual_seed(seed + 7)
-        order = torch.randperm(len(dataset), generator=g).tolist()
-        chosen = order[: batch_size * batches]
+        chosen = validation_indices(len(dataset), batch_size, batches, seed)
         self.batches = [chosen[i : i + batch_size] for i in range(0, len(chosen), batch_size)]
         self.dataset = dataset
         self.samples = len(chosen)
@@ -382,14 +430,6 @@ def run_training(request: TrainRequest) -> TrainOutcome:
     column = column_for(request.method, request.ablation)
     recipe = load_recipe(request.recipe).with_schedule(request.steps, request.snapshot_every)
     device = resolve_device(request.device)
-    if recipe.model.freeze_backbone and column.arch != "awda":
-        # T-OSVI reads a 6-frame stack at every step of every agent episode: its features are not
-        # cached yet, and through the backbone at 240x320 a step would take minutes here
-        raise UsageError(
-            f"recipe {recipe.name!r} freezes the backbone and trains over cached features, which "
-            f"only AWDA columns have so far; train {column.slug} with --recipe small-scratch "
-            "(or paper on a GPU)"
-        )
     data = open_data(request.data, recipe, column, "--data")
     if data.split != "train":
         raise UsageError(
@@ -419,11 +459,18 @@ def run_training(request: TrainRequest) -> TrainOutcome:
         if val_data is not None
         else None
     )
-    if column.arch == "awda" and recipe.model.freeze_backbone:
-        assert isinstance(dataset, AwdaPairDataset)
-        dataset = with_cached_features(dataset, recipe, column, request.progress)
-        if isinstance(val_dataset, AwdaPairDataset):
-            val_dataset = with_cached_features(val_dataset, recipe, column, request.progress)
+    if recipe.model.freeze_backbone:
+        assert isinstance(dataset, AwdaPairDataset | TosviDataset)
+        dataset = with_cached_features(dataset, recipe, request.progress)
+        if isinstance(val_dataset, TosviDataset):
+            # only the stacks the validator reads are encoded, not every frame of the validation
+            # episodes (the validator then reads all of them: the same samples, the same mean)
+            v = recipe.train
+            val_dataset = val_dataset.subset(
+                validation_indices(len(val_dataset), v.batch_size, v.validation_batches, v.seed)
+            )
+        if isinstance(val_dataset, AwdaPairDataset | TosviDataset):
+            val_dataset = with_cached_features(val_dataset, recipe, request.progress)
     train_set: SampleDataset = dataset
     if column.arch == "awda" and column.num_heads == 1:
         train_set = OneHead(dataset)
