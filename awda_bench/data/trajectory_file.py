@@ -40,7 +40,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from awda_bench.data.recorder import EpisodeData
+from awda_bench.data.recorder import EpisodeData, encode_jpeg
 from awda_bench.errors import CorruptFileError
 
 PARTIAL_DIR = ".partial"
@@ -266,3 +266,26 @@ def decode_jpeg(blob: np.ndarray) -> np.ndarray:
     if image is None:
         raise ValueError("not a JPEG image")
     return np.ascontiguousarray(image[..., ::-1])
+
+
+DEFAULT_JPEG_QUALITY = 90
+"""``collect --jpeg-quality``'s default: what snapshots trained before the quality was recorded
+in their training record were trained on."""
+
+
+def as_stored(frames: np.ndarray, quality: int) -> np.ndarray:
+    """``(..., H, W, 3)`` uint8 RGB frames as a collection stores and reads them back: encoded as
+    JPEG at ``quality``, decoded. Learned policies see their live frames so, as their training
+    frames were: on frozen ImageNet features the compression alone moved the ``demo-pointer``
+    head's object choice from 0.68 (raw renders) to 0.93 (stored) within a cell of the target, on
+    the same 40 held-out episodes (reports/learned/recipe-study.md, session 11)."""
+    flat = np.asarray(frames, dtype=np.uint8).reshape(-1, *np.shape(frames)[-3:])
+    out = [decode_jpeg(np.frombuffer(encode_jpeg(f, quality), np.uint8)) for f in flat]
+    return np.stack(out).reshape(np.shape(frames))
+
+
+def trained_jpeg_quality(training: dict[str, Any] | None) -> int:
+    """The JPEG quality of the collection a snapshot was trained on, from its training record
+    (``train`` writes ``data.jpeg_quality``); :data:`DEFAULT_JPEG_QUALITY` for older records."""
+    recorded = ((training or {}).get("data") or {}).get("jpeg_quality")
+    return int(recorded) if recorded is not None else DEFAULT_JPEG_QUALITY

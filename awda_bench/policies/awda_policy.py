@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from awda_bench.data.trajectory_file import as_stored, trained_jpeg_quality
 from awda_bench.episode import EpisodeContext, Observations, observations_of
 from awda_bench.errors import CorruptFileError, UsageError
 from awda_bench.models.awda_net import AwdaNet
@@ -95,6 +96,8 @@ class AWDAPolicy:
                 f"snapshot {snapshot} holds a {loaded.arch!r} model, not 'awda'; pick an AWDA checkpoint directory"
             )
         self.device = "cuda" if torch.cuda.is_available() else "cpu"
+        self.jpeg_quality = trained_jpeg_quality(loaded.training)
+        """Live frames are JPEG-compressed at this quality first, as the training frames were."""
         model = loaded.build_model(self.device)
         if not isinstance(model, AwdaNet):
             raise CorruptFileError(f"snapshot {snapshot} did not build an AwdaNet")
@@ -120,8 +123,8 @@ class AWDAPolicy:
         start = time.perf_counter()
         predicted = predict_waypoints(
             self.model,
-            _resize(np.asarray(demo), h, w),
-            _resize(first[None], h, w)[0],
+            _resize(as_stored(np.asarray(demo), self.jpeg_quality), h, w),
+            _resize(as_stored(first[None], self.jpeg_quality), h, w)[0],
             head=self.config.head,
         )
         self.predict_s = time.perf_counter() - start

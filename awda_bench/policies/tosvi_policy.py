@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from awda_bench.data.trajectory_file import as_stored, trained_jpeg_quality
 from awda_bench.episode import EpisodeContext, Observations, observations_of
 from awda_bench.errors import CorruptFileError, UnknownChoiceError
 
@@ -89,6 +90,8 @@ class TosviPolicy:
                 f"{' / '.join(wanted)} (or --ablation no-waypoints)"
             )
         self.device = "cuda" if torch.cuda.is_available() else "cpu"
+        self.jpeg_quality = trained_jpeg_quality(loaded.training)
+        """Live frames are JPEG-compressed at this quality first, as the training frames were."""
         model = loaded.build_model(self.device)
         if not isinstance(model, TosviNet):
             raise CorruptFileError(f"snapshot {snapshot} did not build a TosviNet")
@@ -115,7 +118,8 @@ class TosviPolicy:
         from awda_bench.models.predict import frames_to_tensor
 
         h, w = self.image_size
-        small = np.stack([_resize(f, h, w) for f in frames])
+        stored = as_stored(frames, self.jpeg_quality)  # as the training frames were
+        small = np.stack([_resize(f, h, w) for f in stored])
         return frames_to_tensor(small, h, w).unsqueeze(0).to(self.device)
 
     def reset(self, ctx: EpisodeContext) -> None:

@@ -498,6 +498,7 @@ def run_training(request: TrainRequest) -> TrainOutcome:
             "suite": data.manifest["definition"].get("suite"),
             "split": data.split,
             "image_size": data.manifest["definition"].get("image_size"),
+            "jpeg_quality": data.manifest["definition"].get("jpeg_quality"),
             "samples": len(dataset),
         },
         "hold_out": request.hold_out,
