@@ -180,6 +180,7 @@ def test_frozen_backbone_gets_no_gradient_and_no_optimizer_state_depth_resnet_do
 def test_policy_encodes_each_frame_once_and_acts_as_the_whole_stack_re_encoded(
     tmp_path: Path, depth: bool
 ) -> None:
+    from awda_bench.data.trajectory_file import as_stored
     from awda_bench.episode import EpisodeContext, EpisodeSpec
     from awda_bench.policies.tosvi_policy import TosviPolicy
 
@@ -198,11 +199,15 @@ def test_policy_encodes_each_frame_once_and_acts_as_the_whole_stack_re_encoded(
     for step in range(5):
         action = policy.act(None)
         index = np.clip(np.arange(step - 2, step + 1), 0, None)
-        stack = _small(np.stack([camera.shown[i] for i in index]))
+        # the policy sees its frames as the collection stores them (JPEG), and so does the check
+        stored = as_stored(np.stack([camera.shown[i] for i in index]), policy.jpeg_quality)
+        stack = _small(stored)
         d = None
         if depth:
             d = torch.from_numpy(np.stack([camera.depths[i] for i in index]))[None, :, None]
-        expected = policy.model.predict_action(_small(demo), stack, d, statistic="mode")
+        expected = policy.model.predict_action(
+            _small(as_stored(demo, policy.jpeg_quality)), stack, d, statistic="mode"
+        )
         np.testing.assert_allclose(action[0, :3], expected[0, :3].numpy(), atol=1e-5)
         assert action[0, 3] == (1.0 if expected[0, 3] > 0 else -1.0)
     # per step: one live frame through the backbone, then the check's whole demo + stack

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import torch
 
+from awda_bench.data.trajectory_file import as_stored  # the frames as the policy sees them
 from awda_bench.episode import EpisodeContext, EpisodeSpec, WristDepth
 from awda_bench.models.architectures import build_model
 from awda_bench.models.config import AwdaConfig, TosviConfig, TrunkConfig
@@ -103,7 +104,9 @@ def test_cached_stack_equals_the_full_forward_pass(
         # training's stack: o_{t-2} .. o_t, indices below 0 repeat frame 0
         index = np.clip(np.arange(step - 2, step + 1), 0, None)
         expected = policy.model.predict_action(
-            _small(demo), _small(np.stack([shown[i] for i in index])), statistic="mode"
+            _small(as_stored(demo, policy.jpeg_quality)),
+            _small(as_stored(np.stack([shown[i] for i in index]), policy.jpeg_quality)),
+            statistic="mode",
         )[0].numpy()
         assert action.shape == (1, 4) and action.dtype == np.float32
         np.testing.assert_allclose(action[0, :3], expected[:3], atol=1e-5)
@@ -121,8 +124,8 @@ def test_cached_depth_vectors_equal_the_full_forward_pass(
         index = np.clip(np.arange(step - 2, step + 1), 0, None)
         depth = torch.from_numpy(np.stack([camera.depths[i] for i in index]))[None, :, None]
         expected = policy.model.predict_action(
-            _small(demo),
-            _small(np.stack([camera.shown[i] for i in index])),
+            _small(as_stored(demo, policy.jpeg_quality)),
+            _small(as_stored(np.stack([camera.shown[i] for i in index]), policy.jpeg_quality)),
             depth,
             statistic="mode",
         )[0].numpy()
