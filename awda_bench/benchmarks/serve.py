@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from awda_bench.benchmarks.throughput import episode_outcomes
 from awda_bench.episode import EpisodeContext, EpisodeSpec
 from awda_bench.harness.methods import served_method
 from awda_bench.harness.results_store import STORE_NAME
@@ -133,17 +134,6 @@ def _latency_ms(url: str, steps: int, warmup: int) -> np.ndarray:
     return np.asarray(times)
 
 
-def _outcomes(run_dir: Path) -> list[tuple]:
-    db = sqlite3.connect(run_dir / STORE_NAME)
-    try:
-        return db.execute(
-            "SELECT task, episode, status, success_once, success_at_end, reached, grasped, steps "
-            "FROM episodes ORDER BY task, episode"
-        ).fetchall()
-    finally:
-        db.close()
-
-
 def _steps(run_dir: Path) -> int:
     db = sqlite3.connect(run_dir / STORE_NAME)
     try:
@@ -187,7 +177,7 @@ def run_serve_bench(args: argparse.Namespace) -> int:
                     command=f"bench serve ({label})",
                 )
                 rows.append((label, run_sweep(config), _steps(out)))
-                outcomes.append(_outcomes(out))
+                outcomes.append(episode_outcomes(out))
     print(
         f"harness throughput, {args.suite} / random, {args.episodes} episodes per task, "
         f"{args.workers} worker(s):"

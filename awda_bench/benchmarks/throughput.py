@@ -61,7 +61,9 @@ def add_harness_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env-factory", default=DEFAULT_ENV_FACTORY, help=argparse.SUPPRESS)
 
 
-def _outcomes(run_dir: Path) -> list[tuple]:
+def episode_outcomes(run_dir: Path) -> list[tuple]:
+    """Every episode's outcome row in ``run_dir``'s store, in (task, episode) order: what two runs
+    of the same episodes must agree on."""
     db = sqlite3.connect(run_dir / STORE_NAME)
     try:
         return db.execute(
@@ -122,7 +124,7 @@ def run_harness_bench(args: argparse.Namespace) -> int:
                     "only new ones are timed"
                 )
             rows.append(describe(workers, result, backend))
-            outcomes.append(_outcomes(out))
+            outcomes.append(episode_outcomes(out))
     print(f"harness throughput: {args.suite} / {args.method}, {args.episodes} episodes per task")
     print(
         f"{'backend':>7} {'workers':>7} {'episodes':>8} {'wall s':>8} {'start s':>8} {'ep/min':>8} "
