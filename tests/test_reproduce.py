@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from awda_bench.cli import main
-from awda_bench.errors import UsageError
+from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.reproduce import (
     LOCK_FILE,
     STAGE_TIMES,
@@ -73,6 +73,22 @@ def test_stage_commands_label_each_column_and_pass_the_options(tmp_path: Path) -
     assert run[run.index("--label") + 1] == "no-waypoints"
     assert run[run.index("--workers") + 1] == "3"
     assert "evaluate full-1 on training tasks" not in stages
+
+
+def test_awda_columns_grasp_by_the_references_centre_rule_unless_told_otherwise(
+    tmp_path: Path,
+) -> None:
+    def methods(**kw) -> tuple[str, str, str]:
+        stages = _plan(tmp_path, columns=("full-1", "tosvi"), recipe="small-scratch", **kw)
+        return tuple(  # type: ignore[return-value]
+            stages[name].argv[stages[name].argv.index("--method") + 1]  # type: ignore[attr-defined]
+            for name in ("evaluate full-1", "evaluate full-1 on training tasks", "evaluate tosvi")
+        )
+
+    assert methods() == ("awda-centre", "awda-centre", "tosvi")
+    assert methods(grasp_select="waypoint") == ("awda", "awda", "tosvi")
+    with pytest.raises(UnknownChoiceError, match="waypoint"):
+        _plan(tmp_path, grasp_select="middle")
 
 
 def test_each_collect_and_run_stage_command_decides_the_config_its_progress_is_read_from(

@@ -77,7 +77,7 @@ def test_paper_recipe_is_table_s2_and_recipes_refuse_unknown_fields(tmp_path: Pa
     assert (m.attention_layers, m.attention_heads, m.hidden_dim, m.gamma) == (2, 4, 256, 1e-3)
     assert (t.batch_size, t.learning_rate, t.snapshot_every_steps) == (30, 5e-4, 10_000)
     small = load_recipe("small")
-    assert small.train.max_steps == 10 * small.train.snapshot_every_steps
+    assert small.train.max_steps >= 10 * small.train.snapshot_every_steps  # 10 to evaluate
     assert small.sha256 != paper.sha256
     bad = tmp_path / "bad.toml"
     bad.write_text('name = "bad"\nsuites = ["pick_place"]\n[train]\nbatchsize = 3\n')

@@ -5,9 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from awda_bench.primitives.config import GRASP_SELECTS
 from awda_bench.reproduce import (
     COLUMN_KEYS,
     DEFAULT_COLUMNS,
+    DEFAULT_GRASP_SELECT,
     SUITES,
     ReproduceConfig,
     format_plan,
@@ -60,6 +62,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--threads", type=int, default=None, help="torch threads for training")
     parser.add_argument("--no-fit-check", action="store_true", help="skip Full-1 on train tasks")
     parser.add_argument(
+        "--grasp-select",
+        default=DEFAULT_GRASP_SELECT,
+        choices=GRASP_SELECTS,
+        help="how AWDA columns pick the object to grasp from wrist depth: centre (default, the "
+        "reference's rule: the component nearest the image centre) or waypoint (where the "
+        "predicted waypoint points; run's awda default)",
+    )
+    parser.add_argument(
         "--out", type=Path, default=None, help="directory (default runs/reproduce-SUITE-RECIPE)"
     )
     parser.add_argument("--dry-run", action="store_true", help="print the plan and stop")
@@ -89,6 +99,7 @@ def run(args: argparse.Namespace) -> int:
         steps=args.steps,
         threads=args.threads,
         fit_check=not args.no_fit_check,
+        grasp_select=args.grasp_select,
         dry_run=args.dry_run,
         progress=not args.no_progress,
     )
