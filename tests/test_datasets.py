@@ -186,3 +186,39 @@ def test_dataset_info_cli_and_a_corrupt_file(
     assert "task_00.h5 is unreadable" in err and len(err.splitlines()) == 1
     assert main(["dataset", "info", str(tmp_path / "nothing")]) == 2
     assert "not a collect directory" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_fig_s6_draws_each_synthesized_path_where_the_camera_sees_it(
+    data: CollectedData, tiny: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    import cv2
+
+    from awda_bench.data.synthesis_figure import synthesized_panel
+    from awda_bench.harness.figures import project_points
+
+    (ref,) = data.select("synthesized")
+    frame = data.frames(ref, [0])[0]
+    panel = synthesized_panel(data, ref)
+    assert panel.shape == frame.shape
+    pixels = project_points(data.tcp_pos(ref), *data.camera(ref))
+    inside = [
+        (int(round(u)), int(round(v)))
+        for u, v in pixels
+        if 16 <= v < frame.shape[0] and 0 <= u < frame.shape[1]  # below the label
+    ]
+    assert inside, "the synthesized path should be in view"
+    changed = np.abs(panel.astype(int) - frame.astype(int)).sum(-1) > 0
+    assert all(changed[v, u] for u, v in inside)  # drawn on every point of the path
+    # far from the path (and from the label) the frame is untouched
+    far = np.ones_like(changed)
+    for u, v in inside:
+        far[max(0, v - 8) : v + 9, max(0, u - 8) : u + 9] = False
+    far[:18] = False
+    assert not changed[far].any()
+    out = tmp_path / "s6.png"
+    assert main(["dataset", "fig-s6", str(tiny), "--out", str(out)]) == 0
+    assert "Fig. S6" in capsys.readouterr().out
+    assert cv2.imread(str(out)).shape == frame.shape  # one synthesized episode: one panel
+    assert main(["dataset", "fig-s6", str(tiny), "--out", str(out), "--episodes", "0"]) == 2
+    assert "--episodes" in capsys.readouterr().err

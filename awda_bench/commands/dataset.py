@@ -1,4 +1,5 @@
-"""``python -m awda_bench dataset info DATA_DIR``: what a collection holds, and a contact sheet."""
+"""``python -m awda_bench dataset info DATA_DIR``: what a collection holds, and a contact sheet;
+``dataset fig-s6 DATA_DIR --out PNG``: its synthesized trajectories drawn over their scenes."""
 
 from __future__ import annotations
 
@@ -36,6 +37,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     info.add_argument(
         "--allow-incomplete", action="store_true", help="report an unfinished collection too"
     )
+    s6 = sub.add_parser(
+        "fig-s6",
+        help="Fig. S6: synthesized trajectories drawn over their scenes (PNG)",
+        description="Draw the recorded TCP path of synthesized episodes over each episode's first "
+        "frame (projected through its own camera, coloured dark to bright in time order), several "
+        "panels per image.",
+    )
+    s6.add_argument("data_dir", type=Path, metavar="DATA_DIR")
+    s6.add_argument("--out", type=Path, required=True, help="PNG to write")
+    s6.add_argument("--episodes", type=int, default=8, help="panels (default 8)")
+    s6.add_argument("--columns", type=int, default=4, help="panels per row (default 4)")
     return parser
 
 
@@ -44,6 +56,15 @@ def run(args: argparse.Namespace) -> int:
     from awda_bench.data.info import contact_sheet, dataset_info, verify
     from awda_bench.errors import UsageError
 
+    if args.dataset_command == "fig-s6":
+        from awda_bench.data.synthesis_figure import fig_s6
+
+        data = CollectedData(args.data_dir)
+        try:
+            print(f"Fig. S6: {fig_s6(data, args.out, args.episodes, args.columns)}")
+        finally:
+            data.close()
+        return 0
     if args.episodes < 1:
         raise UsageError(f"--episodes must be >= 1, got {args.episodes}")
     data = CollectedData(args.data_dir, allow_incomplete=args.allow_incomplete)

@@ -1,5 +1,5 @@
-"""Pictures: success-vs-snapshot curves (matplotlib), Fig. S5-style waypoint overlays and MP4s
-(OpenCV). Frames are plain ``(H, W, 3)`` uint8 RGB arrays; colours below are RGB.
+"""Pictures: success-vs-snapshot curves (matplotlib), Fig. S5-style waypoint overlays, Fig. S6-style
+paths and MP4s (OpenCV). Frames are plain ``(H, W, 3)`` uint8 RGB arrays; colours below are RGB.
 
 Fig. S5 convention: free-space waypoints red, brightening with their order; waypoints carrying the
 grasp attribute (the end of a grasp-attributed segment) green; consecutive waypoints joined. Our
@@ -94,6 +94,39 @@ def draw_waypoints(
         if p is not None:
             cv2.circle(out, p, radius_px, colour, -1, cv2.LINE_AA)
             cv2.circle(out, p, radius_px, (255, 255, 255), 1, cv2.LINE_AA)
+    return out
+
+
+def path_colours(count: int, colormap: str = "plasma") -> list[tuple[int, int, int]]:
+    """``count`` RGB colours ordered along ``colormap`` (first dark, last bright): the order of a
+    path's points in Fig. S6."""
+    cmap = matplotlib.colormaps[colormap]
+    return [
+        tuple(int(round(255 * c)) for c in cmap(t)[:3])  # type: ignore[misc]
+        for t in np.linspace(0.0, 0.95, max(1, count))
+    ]
+
+
+def draw_path(frame: np.ndarray, pixels: np.ndarray, thickness_px: int = 2) -> np.ndarray:
+    """A copy of ``frame`` with a path (``(N, 2)`` pixels, NaN = not drawn) as segments coloured by
+    their order (:func:`path_colours`), a white-rimmed dot at its start and a square at its end."""
+    out = np.ascontiguousarray(frame, dtype=np.uint8).copy()
+    pts = np.asarray(pixels, float)
+    colours = path_colours(len(pts))
+    for k in range(1, len(pts)):
+        if np.isnan(pts[k - 1]).any() or np.isnan(pts[k]).any():
+            continue
+        start = (int(round(pts[k - 1][0])), int(round(pts[k - 1][1])))
+        end = (int(round(pts[k][0])), int(round(pts[k][1])))
+        cv2.line(out, start, end, colours[k], thickness_px, cv2.LINE_AA)
+    ok = [i for i in range(len(pts)) if not np.isnan(pts[i]).any()]
+    if ok:
+        first = (int(round(pts[ok[0]][0])), int(round(pts[ok[0]][1])))
+        last = (int(round(pts[ok[-1]][0])), int(round(pts[ok[-1]][1])))
+        cv2.circle(out, first, 4, colours[ok[0]], -1, cv2.LINE_AA)
+        cv2.circle(out, first, 4, (255, 255, 255), 1, cv2.LINE_AA)
+        cv2.rectangle(out, (last[0] - 3, last[1] - 3), (last[0] + 3, last[1] + 3), colours[-1], -1)
+        cv2.rectangle(out, (last[0] - 3, last[1] - 3), (last[0] + 3, last[1] + 3), (255,) * 3, 1)
     return out
 
 
