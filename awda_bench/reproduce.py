@@ -41,6 +41,7 @@ from typing import Any
 
 from awda_bench.data.config import CollectConfig
 from awda_bench.errors import AwdaError, CorruptFileError, UnknownChoiceError, UsageError
+from awda_bench.harness.paper_values import PAPER_S3_PICK_PLACE, PAPER_S4
 from awda_bench.harness.sweep import SweepConfig
 from awda_bench.primitives.config import CENTRE_SUFFIX, GRASP_SELECTS
 from awda_bench.training.columns import COLUMNS, Column
@@ -660,22 +661,6 @@ def run_stages(
             print(f"[reproduce] {stage.name}: {attempt.wall_s:.0f} s", flush=True)
         return mine
 
-
-PAPER_S3_PICK_PLACE: dict[str, str] = {
-    "full-1": "1.0 ± .00",
-    "single-head": ".99 ± .00",
-    "no-ad": "1.0 ± .00",
-    "no-adm": ".98 ± .01",
-    "no-waypoints": ".01 ± .02",
-    "only-waypoints": ".98 ± .01",
-    "tosvi": ".10 ± .05",
-    "tosvi-depth": ".00 ± .00",
-}
-"""Table S3, pick-and-place row, of the AWDA supplementary (mean ± SE over 10 snapshots)."""
-
-PAPER_S4: dict[tuple[str, str], str] = {("full-1", "drawer"): "0.29 ± 0.033"}
-"""Table S4 cells of the supplementary this pipeline can produce (MOSAIC's own drawer number,
-0.15 ± 0.038, is another method's)."""
 
 PAPER_SCALE = {
     "image": "240x320",

@@ -1,4 +1,5 @@
-"""``python -m awda_bench report``: tables, figures and summary.json from a run store."""
+"""``python -m awda_bench report``: tables, figures and summary.json from a run store; with
+``--results-page``, ``reports/RESULTS.md`` from the report directories its index names."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from pathlib import Path
 
 from awda_bench.harness.aggregate import DEFAULT_METRIC, METRICS
 from awda_bench.harness.report import write_report
+from awda_bench.harness.results_page import DEFAULT_INDEX, write_results_page
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -30,10 +32,26 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         default=DEFAULT_METRIC,
         help=f"success metric (default {DEFAULT_METRIC})",
     )
+    parser.add_argument(
+        "--results-page",
+        action="store_true",
+        help="instead: write RESULTS.md beside the results index (Tables S3/S4 with the paper's "
+        "values, reference rows, grasp failures) from the report directories it names",
+    )
+    parser.add_argument(
+        "--index",
+        type=Path,
+        default=DEFAULT_INDEX,
+        help=f"results index for --results-page (default {DEFAULT_INDEX})",
+    )
     return parser
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.results_page:
+        page = write_results_page(args.index)
+        print(f"results page: {page} (from {args.index})")
+        return 0
     result = write_report(args.runs, args.out, args.metric)
     for warning in result.warnings:
         print(f"WARNING: {warning}", file=sys.stderr)

@@ -1,0 +1,130 @@
+"""The results page's index: which report directory feeds which cell (``reports/results_sources.toml``).
+
+One inline table per cell, so pointing a cell at another directory is a one-line change::
+
+    [pick_place]                       # a suite: whole-suite cells, keyed by column
+    full-1 = { source = "learned/pick_place-small-v4" }
+    scripted = { source = "." }        # "." is the index's own directory (reports/)
+
+    [mosaic]                           # whole-suite MOSAIC cells: every family and All
+    gt-waypoints = { source = "." }
+
+    [mosaic.drawer]                    # one held-out family
+    full-1 = { source = "learned/mosaic-small-drawer", note = "older recipe" }
+
+``source``: a report directory (what ``python -m awda_bench report`` writes), relative to the
+index's directory. ``label``: the method label inside it (default: the column key, which is the
+label ``reproduce`` gives a column). ``note``: a short text printed beside the cell.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
+from awda_bench.harness.aggregate import S4_FAMILIES
+from awda_bench.harness.paper_values import NO_COUNTERPART, S3_COLUMNS
+
+INDEX_NAME = "results_sources.toml"
+"""The index's file name (in ``reports/``)."""
+
+SUITES: tuple[str, ...] = ("pick_place", "mosaic")
+"""Suites the page has tables for."""
+
+REFERENCE_KEYS: tuple[str, ...] = ("scripted", "gt-waypoints", "gt-waypoints-centre", "random")
+"""Column keys of the reference rows (not learned): the run method names."""
+
+LEARNED_KEYS: tuple[str, ...] = tuple(k for k, _ in S3_COLUMNS if k not in NO_COUNTERPART)
+"""Column keys of Table S3 this project can train."""
+
+FAMILY_KEYS: tuple[str, ...] = tuple(k for k, _ in S4_FAMILIES)
+"""MOSAIC families an entry may name (Table S4's columns)."""
+
+ENTRY_FIELDS: tuple[str, ...] = ("source", "label", "note")
+"""Fields of one entry."""
+
+
+@dataclass(frozen=True)
+class SourceEntry:
+    """One line of the index: a cell and where its numbers come from."""
+
+    suite: str
+    """Suite (``pick_place``, ``mosaic``)."""
+    column: str
+    """Column key (``full-1``, ``tosvi``, ``gt-waypoints``, ...)."""
+    family: str | None
+    """MOSAIC family of a held-out-family entry; ``None``: the whole suite (and its families)."""
+    source: str
+    """Report directory, relative to the index's directory (``"."``: that directory)."""
+    label: str
+    """Method label inside the source's summary.json / per_snapshot.csv / grasp.csv."""
+    note: str
+    """Printed beside the cell (empty: none)."""
+
+    @property
+    def name(self) -> str:
+        """How an error names the entry: ``[mosaic.drawer] full-1``."""
+        table = self.suite if self.family is None else f"{self.suite}.{self.family}"
+        return f"[{table}] {self.column}"
+
+
+def _entry(index: Path, suite: str, family: str | None, column: str, value: object) -> SourceEntry:
+    where = f"{index} [{suite if family is None else f'{suite}.{family}'}] {column}"
+    if column in NO_COUNTERPART:
+        raise UsageError(f"{where}: {NO_COUNTERPART[column]}; delete the entry")
+    if column not in LEARNED_KEYS + REFERENCE_KEYS:
+        raise UnknownChoiceError(f"column in {where}", column, LEARNED_KEYS + REFERENCE_KEYS)
+    if not isinstance(value, dict) or not isinstance(value.get("source"), str):
+        raise UsageError(
+            f'{where}: write it as {column} = {{ source = "DIR" }} (DIR relative to {index.parent})'
+        )
+    unknown = sorted(set(value) - set(ENTRY_FIELDS))
+    if unknown:
+        raise UnknownChoiceError(f"field in {where}", unknown[0], ENTRY_FIELDS)
+    for field_name in ("label", "note"):
+        if not isinstance(value.get(field_name, ""), str):
+            raise UsageError(f"{where}: {field_name} must be a string")
+    return SourceEntry(
+        suite=suite,
+        column=column,
+        family=family,
+        source=value["source"],
+        label=value.get("label", column),
+        note=value.get("note", ""),
+    )
+
+
+def load_index(index: Path) -> list[SourceEntry]:
+    """The entries of ``index`` in file order; a bad file raises a one-line
+    :class:`~awda_bench.errors.UsageError` naming the entry and the fix."""
+    if not index.is_file():
+        raise UsageError(f"no results index at {index}; write one (see reports/{INDEX_NAME})")
+    try:
+        data = tomllib.loads(index.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise CorruptFileError(f"{index} is not valid TOML: {exc}") from exc
+    entries: list[SourceEntry] = []
+    for suite, table in data.items():
+        if suite not in SUITES:
+            raise UnknownChoiceError(f"suite table in {index}", suite, SUITES)
+        if not isinstance(table, dict):
+            raise UsageError(f"{index}: [{suite}] must be a table of cells")
+        for key, value in table.items():
+            if suite == "mosaic" and key in FAMILY_KEYS and isinstance(value, dict):
+                for column, cell in value.items():
+                    entries.append(_entry(index, suite, key, column, cell))
+            else:
+                entries.append(_entry(index, suite, None, key, value))
+    seen: dict[tuple[str, str, str | None], SourceEntry] = {}
+    for entry in entries:
+        for family in (entry.family, None) if entry.family else (None, *FAMILY_KEYS):
+            other = seen.get((entry.suite, entry.column, family))
+            if other is not None:
+                raise UsageError(
+                    f"{index}: {entry.name} and {other.name} both fill the same cells; "
+                    "delete one of them"
+                )
+        seen[(entry.suite, entry.column, entry.family)] = entry
+    return entries
