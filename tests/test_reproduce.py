@@ -75,6 +75,28 @@ def test_stage_commands_label_each_column_and_pass_the_options(tmp_path: Path) -
     assert "evaluate full-1 on training tasks" not in stages
 
 
+def test_the_summary_names_the_command_that_decides_the_same_config(tmp_path: Path) -> None:
+    import argparse
+    import shlex
+
+    from awda_bench.commands import reproduce as command
+    from awda_bench.reproduce import command_line
+
+    parser = argparse.ArgumentParser()
+    command.add_parser(parser.add_subparsers())
+    for kw in (
+        {},
+        {"columns": ("full-1", "tosvi"), "steps": 40, "grasp_select": "waypoint", "workers": 1},
+        {"suite": "mosaic", "hold_out": "drawer", "fit_check": False, "episodes": 4},
+    ):
+        config = ReproduceConfig(
+            **{"suite": "pick_place", "out": tmp_path / "rep", "recipe": "small", **kw}
+        )
+        words = shlex.split(command_line(config))
+        assert words[:3] == ["python", "-m", "awda_bench"]
+        assert command.config_from_args(parser.parse_args(words[3:])) == config
+
+
 def test_awda_columns_grasp_by_the_references_centre_rule_unless_told_otherwise(
     tmp_path: Path,
 ) -> None:

@@ -77,7 +77,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return parser
 
 
-def run(args: argparse.Namespace) -> int:
+def config_from_args(args: argparse.Namespace) -> ReproduceConfig:
+    """What the command line decides."""
     out = args.out or Path("runs") / f"reproduce-{args.suite}-{Path(args.recipe).stem}"
     columns = args.columns
     if columns is None:
@@ -85,7 +86,7 @@ def run(args: argparse.Namespace) -> int:
 
         frozen = load_recipe(args.recipe).model.freeze_backbone
         columns = "full-1" if frozen else ",".join(DEFAULT_COLUMNS)
-    config = ReproduceConfig(
+    return ReproduceConfig(
         suite=args.suite,
         out=out,
         recipe=args.recipe,
@@ -103,6 +104,10 @@ def run(args: argparse.Namespace) -> int:
         dry_run=args.dry_run,
         progress=not args.no_progress,
     )
+
+
+def run(args: argparse.Namespace) -> int:
+    config = config_from_args(args)
     stages = plan_stages(config)
     print(format_plan(config, stages), flush=True)
     if config.dry_run:
