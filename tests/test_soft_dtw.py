@@ -179,3 +179,6 @@ def test_bench_soft_dtw_times_native_implementations_side_by_side(
     assert any(line.startswith("  speed-up of") for line in lines)
     with pytest.raises(UsageError, match="implementation"):
         run_soft_dtw_bench(parser.parse_args(["--implementations", "cuda-kernel"]))
+    # small's demo-pointer head needs its training camera: a random-image step is refused
+    with pytest.raises(UsageError, match="train --recipe"):
+        run_soft_dtw_bench(parser.parse_args(["--recipe", "small", "--step"]))

@@ -20,12 +20,13 @@ import argparse
 import statistics
 import time
 from collections.abc import Callable
+from dataclasses import replace
 
 import torch
 
 from awda_bench.errors import UsageError
 from awda_bench.models.awda_net import AwdaNet
-from awda_bench.models.config import AwdaConfig
+from awda_bench.models.config import CELL_HEADS, AwdaConfig
 from awda_bench.models.soft_dtw import IMPLEMENTATIONS
 from awda_bench.models.waypoint_loss import multi_waypoint_sdtw_loss
 from awda_bench.training.loop import resolve_device
@@ -97,7 +98,17 @@ def run_soft_dtw_bench(args: argparse.Namespace) -> int:
         torch.set_num_threads(args.threads)
     device = resolve_device(args.device)
     recipe = load_recipe(args.recipe)
-    cfg = model_config(recipe, column_for("awda", None))
+    if args.step and recipe.model.head in CELL_HEADS:
+        raise UsageError(
+            f"--step times a Full-1 step on random images; recipe {recipe.name}'s "
+            f"{recipe.model.head} head votes along its training camera's rays and trains over "
+            "cached features: time its step with `train --recipe ... --steps 20` instead, or drop "
+            "--step"
+        )
+    # the loss's settings only: the identification loss (cell heads) needs a camera and labels
+    # that random trajectories do not have, and is not part of the Soft-DTW loss timed here
+    loss_only = replace(recipe, model=replace(recipe.model, identification_weight=0.0))
+    cfg = model_config(loss_only, column_for("awda", None))
     assert isinstance(cfg, AwdaConfig)
     impls = [s for s in args.implementations.split(",") if s] or list(NATIVE[device.type])
     unknown = [s for s in impls if s not in IMPLEMENTATIONS]
