@@ -18,7 +18,9 @@ and the CLI stay one program in ``.venv``.
 
 from __future__ import annotations
 
+import json
 import os
+import subprocess
 from pathlib import Path
 
 from awda_bench.errors import UsageError
@@ -32,6 +34,9 @@ a simulator not listed runs in this interpreter's environment."""
 
 PYTHON_OVERRIDE_VARS = {"metaworld": "AWDA_METAWORLD_PYTHON"}
 """Simulator -> environment variable naming another interpreter for its workers."""
+
+WORKER_PACKAGES = {"metaworld": ("metaworld", "mujoco", "gymnasium", "numpy")}
+"""Simulator -> the packages of its workers' environment recorded with every run."""
 
 
 class MissingEnvironmentError(UsageError):
@@ -54,3 +59,20 @@ def worker_python(simulator: str) -> str | None:
             "`bash scripts/setup.sh`"
         )
     return str(python)
+
+
+def worker_versions(simulator: str) -> dict[str, str]:
+    """Versions of the packages in ``simulator``'s worker environment, keyed
+    ``"<environment> <package>"`` (empty for a simulator that runs in this one): a run's record
+    must name the MuJoCo that played it, not this environment's."""
+    python = worker_python(simulator)
+    if python is None:
+        return {}
+    code = (
+        "import json, sys; from importlib import metadata as m; "
+        "print(json.dumps({p: m.version(p) for p in sys.argv[1:]}))"
+    )
+    names = WORKER_PACKAGES[simulator]
+    out = subprocess.run([python, "-c", code, *names], capture_output=True, text=True, check=True)
+    venv = SECOND_VENVS[simulator]
+    return {f"{venv} {k}": str(v) for k, v in json.loads(out.stdout).items()}

@@ -94,6 +94,15 @@ def test_a_missing_second_environment_is_one_line_naming_setup(
     assert not (tmp_path / "r").exists()
 
 
+def test_videos_are_refused_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from awda_bench.cli import main
+
+    code = main(["run", "--suite", "metaworld", "--videos", "1", "--out", str(tmp_path / "r")])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and "--videos" in err
+    assert not (tmp_path / "r").exists()
+
+
 class _FlagEnv:
     """An env whose per-step success flag is up at step 3 only (Meta-World's is not sticky)."""
 
@@ -206,6 +215,10 @@ def test_scripted_and_random_through_the_harness(tmp_path: Path) -> None:
     rows = _records(tmp_path / "s")
     assert all(row[4] < suite.horizon_steps for row in rows.values())  # stops at its success
     assert all(row[4] == suite.horizon_steps for row in _records(tmp_path / "r").values())
+    with ResultsStore(tmp_path / "s", create=False) as store:
+        versions = json.loads(store.raw("SELECT versions FROM runs")[0][0])
+    assert versions[".venv-metaworld mujoco"] == "3.3.0"  # the MuJoCo that played, not .venv's
+    assert versions[".venv-metaworld metaworld"] == "3.1.1"
 
 
 @needs_metaworld

@@ -40,7 +40,7 @@ from awda_bench.harness.worker_pool import (
     run_inline,
 )
 from awda_bench.metaworld_tasks import check_task_names
-from awda_bench.runtimes import worker_python
+from awda_bench.runtimes import worker_python, worker_versions
 from awda_bench.serving.remote_policy import DEFAULT_TIMEOUT_S
 from awda_bench.suites import SIMULATORS, SUITES_DIR, Suite, load_suite
 
@@ -279,7 +279,7 @@ def run_sweep(config: SweepConfig) -> SweepResult:
             plan.snapshots,
             plan.expected_per_snapshot,
             config.command,
-            software_versions(),
+            {**software_versions(), **worker_versions(plan.suite.simulator)},
             plan.suite.display_name,
             plan.method.privileged,
         )
