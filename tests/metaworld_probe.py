@@ -7,6 +7,9 @@ and ``awda_bench.episode`` only.
 Row 0: TCP position [m], gripper opening [m], mean and checksum of the first frame.
 Row 1: world point back-projected from the wrist depth image's median-depth pixels (x, y, z),
 fraction of pixels with a depth, the first frame's height and width.
+Row 2: the TCP projected into the first frame with ``camera()`` (u, v [px]), then zeros.
+Row 3 (``DemoProbePolicy`` only): demo frame count, mean of its first and last frame, whether the
+TCP and the current frame are unchanged after the demo was played, 0.
 """
 
 from __future__ import annotations
@@ -44,6 +47,9 @@ class ProbePolicy:
         wrist = obs.wrist_depth()
         depth = wrist.depth_m[0]
         point = backprojected_median(depth, wrist.intrinsic_cv[0], wrist.cam2world_cv[0])
+        intrinsic, world2cam = obs.camera()
+        cam = world2cam @ np.append(proprio.tcp_pos[0], 1.0)
+        u, v = (intrinsic @ cam)[:2] / cam[2]
         checksum = float(
             np.sum(frame.astype(np.int64) * np.arange(frame.size).reshape(frame.shape) % 9973)
         )
@@ -51,6 +57,7 @@ class ProbePolicy:
             [
                 [*proprio.tcp_pos[0], proprio.gripper_opening_m[0], frame.mean(), checksum],
                 [*point, float(np.mean(depth > 0)), frame.shape[0], frame.shape[1]],
+                [u, v, 0, 0, 0, 0],
             ]
         )
         self._rng = np.random.default_rng(ctx.spec.seed)
@@ -65,3 +72,21 @@ class ProbePolicy:
     @property
     def waypoints(self) -> np.ndarray | None:
         return self._waypoints
+
+
+class DemoProbePolicy(ProbePolicy):
+    """:class:`ProbePolicy` that also asks for the demo (played in the episode's own env)."""
+
+    name = "demo-probe"
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        super().reset(ctx)
+        obs = observations_of(ctx)
+        before = obs.proprio().tcp_pos.copy()
+        demo = obs.demo_frames(10)
+        same = np.array_equal(obs.proprio().tcp_pos, before) and np.array_equal(
+            obs.rgb()[0], obs.first_frame()
+        )
+        assert self._waypoints is not None
+        row = [len(demo), demo[0].mean(), demo[-1].mean(), float(same), 0.0, 0.0]
+        self._waypoints = np.vstack([self._waypoints, row])

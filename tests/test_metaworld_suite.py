@@ -201,6 +201,27 @@ def test_layouts_are_seeded_identical_across_workers_and_different_across_seeds(
         point = probe[1, :3]
         # below the hand, on the table or an object on it: intrinsics and pose agree with the scene
         assert np.linalg.norm(point[:2] - tcp[:2]) < 0.1 and -0.05 < point[2] < tcp[2]
+        u, v = probe[2, :2]
+        assert 0 < u < 224 and 0 < v < 224  # the gripper is in the third-person frame
+
+
+@pytest.mark.slow
+@needs_metaworld
+def test_the_demo_is_the_expert_in_another_layout_and_leaves_the_episode_as_it_was(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])
+    )
+    suite = load_suite("metaworld")
+    task = suite.held_out[0]  # button-press: the button goes in, the frame changes
+    result = _sweep(tmp_path / "d", "metaworld_probe:DemoProbePolicy", 1, (task,), 1)
+    row = _records(tmp_path / "d")[(task, 0)]
+    assert result.errors == 0, row[2]
+    probe = np.array(json.loads(row[-1]))
+    count, first_mean, last_mean, unchanged = probe[3, :4]
+    assert count == 10 and first_mean != last_mean
+    assert unchanged == 1.0  # the episode's scene is back in its own layout after the demo
 
 
 @pytest.mark.slow
