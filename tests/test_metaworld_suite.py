@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from awda_bench.episode import EpisodeContext, EpisodeSpec
-from awda_bench.errors import UnknownChoiceError
+from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.harness.episode_runner import run_episode
 from awda_bench.harness.results_store import ResultsStore
 from awda_bench.harness.sweep import SweepConfig, prepare_sweep, run_sweep
@@ -92,6 +92,18 @@ def test_a_missing_second_environment_is_one_line_naming_setup(
     assert code == 2
     assert len(err.splitlines()) == 1 and "bash scripts/setup.sh" in err
     assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("workers, backend", [(0, "local"), (1, "ray")])
+def test_workers_outside_the_second_environment_are_refused(
+    tmp_path: Path, workers: int, backend: str
+) -> None:
+    config = SweepConfig(
+        suite="metaworld", method="random", out=tmp_path / "r", workers=workers, backend=backend
+    )
+    with pytest.raises(UsageError, match="--workers >= 1") as err:
+        prepare_sweep(config)
+    assert "\n" not in str(err.value)
 
 
 def test_videos_are_refused_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
