@@ -11,7 +11,8 @@ imports ``mujoco``.
 - :mod:`.renderer`: one MuJoCo renderer per process, any camera, RGB upright and depth in metres;
 - :mod:`.env`: a suite's tasks behind the harness's env interface;
 - :mod:`.observations`: what an observation-only policy sees;
-- :mod:`.expert`: the package's scripted policies as the ``scripted`` method.
+- :mod:`.expert`: the package's scripted policies as the ``scripted`` method;
+- :mod:`.demo`: the demonstration video (the expert in the demo layout).
 """
 
 import os

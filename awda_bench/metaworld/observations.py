@@ -26,7 +26,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from awda_bench.episode import EpisodeSpec, Proprioception, WristDepth
-from awda_bench.metaworld.expert import expert_action, task_policy
+from awda_bench.metaworld.demo import demo_frames
 from awda_bench.metaworld.layout import reset_to_layout
 from awda_bench.metaworld.renderer import FrameRenderer, camera_pose
 from awda_bench.suites import Suite
@@ -131,31 +131,14 @@ class MetaWorldObservations:
         if cached is not None and len(cached) == count:
             return np.asarray(cached)
         self._before_first_step("demo_frames()")
-        frames = self._play_demo(count)
+        frames = demo_frames(
+            self._env.task_env,
+            self._env.task_name or "",
+            self._spec.demo_seed,
+            count=count,
+            horizon=self._env.suite.horizon_steps,
+            render=lambda: self.rgb()[0],
+        )
         reset_to_layout(self._env.task_env, self._spec.seed)  # back to the episode's layout
         self._extras["demo_frames"] = list(frames)
         return frames
-
-    def _play_demo(self, count: int) -> np.ndarray:
-        """The expert in the demo layout, twice (layouts and physics are exact): once to find its
-        length, once rendering the ``count`` frames evenly spaced over it."""
-        env = self._env.task_env
-        horizon = self._env.suite.horizon_steps
-        length = horizon
-        obs = reset_to_layout(env, self._spec.demo_seed)
-        policy = task_policy(self._env.task_name or "")
-        for t in range(1, horizon + 1):
-            obs, _r, _te, _tr, info = env.step(expert_action(policy, obs)[0])
-            if info.get("success", 0.0):
-                length = t
-                break
-        steps = np.linspace(0, length, count).round().astype(int)
-        rendered: dict[int, np.ndarray] = {}
-        obs = reset_to_layout(env, self._spec.demo_seed)
-        policy = task_policy(self._env.task_name or "")
-        for t in range(length + 1):
-            if t in steps:
-                rendered[t] = self.rgb()[0]
-            if t < length:
-                obs, *_ = env.step(expert_action(policy, obs)[0])
-        return np.stack([rendered[int(t)] for t in steps])
