@@ -25,6 +25,9 @@ from awda_bench.harness.interpreter_process import child_environment
 from awda_bench.metaworld_tasks import ALL_TASKS
 from awda_bench.runtimes import worker_python
 
+MODULE = "awda_bench.benchmarks.metaworld"
+"""This module's name (``__name__`` is ``"__main__"`` when it runs with ``-m``)."""
+
 THIRD_PERSON = ("corner4", 224)
 """Camera and square size of the third-person frames measured (the suites')."""
 
@@ -121,7 +124,7 @@ def run_metaworld_bench(args: argparse.Namespace) -> int:
     if importlib.util.find_spec("metaworld") is None:
         python = worker_python("metaworld")
         assert python is not None
-        command = [python, "-m", __name__, *argv_of(args)]
+        command = [python, "-m", MODULE, *argv_of(args)]
         return subprocess.run(command, env=child_environment(), check=False).returncode
     import awda_bench.metaworld  # noqa: F401  (MUJOCO_GL before mujoco is imported)
 
@@ -130,7 +133,7 @@ def run_metaworld_bench(args: argparse.Namespace) -> int:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(prog=f"python -m {__name__}")
+    parser = argparse.ArgumentParser(prog=f"python -m {MODULE}")
     add_metaworld_args(parser)
     sys.exit(run_metaworld_bench(parser.parse_args()))
 
