@@ -39,7 +39,14 @@ def make_task_env(name: str) -> Any:
 
 def reset_to_layout(env: Any, seed: int) -> np.ndarray:
     """Reset ``env`` to the layout of ``seed``; the first observation (39 numbers: hand, gripper,
-    objects, the previous frame of those, goal)."""
+    objects, the previous frame of those, goal).
+
+    The goal markers (sites) are put where the goal is, as every ``step`` does: after Meta-World's
+    own reset they stand elsewhere until the first step (pick-place-wall's by up to ~10 cm), so the
+    first frame would show the goal where it is not. Rendering only: physics and observations
+    never read the sites' world positions."""
     env.seed(int(seed))
     obs, _info = env.reset()
+    for site in env._target_site_config:
+        env._set_pos_site(*site)
     return np.asarray(obs, dtype=np.float64)
