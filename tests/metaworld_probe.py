@@ -90,3 +90,16 @@ class DemoProbePolicy(ProbePolicy):
         assert self._waypoints is not None
         row = [len(demo), demo[0].mean(), demo[-1].mean(), float(same), 0.0, 0.0]
         self._waypoints = np.vstack([self._waypoints, row])
+
+
+class CrashingPolicy(ProbePolicy):
+    """Kills its worker process in the first episode's reset (episode 0 of any task)."""
+
+    name = "crashing"
+
+    def reset(self, ctx: EpisodeContext) -> None:
+        if ctx.spec.episode == 0:
+            import os
+
+            os._exit(7)
+        super().reset(ctx)

@@ -238,6 +238,22 @@ def test_the_demo_is_the_expert_in_another_layout_and_leaves_the_episode_as_it_w
 
 @pytest.mark.slow
 @needs_metaworld
+def test_a_worker_that_dies_is_recorded_and_replaced(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])
+    )
+    task = load_suite("metaworld").held_out[1]
+    result = _sweep(tmp_path / "c", "metaworld_probe:CrashingPolicy", 1, (task,), 2)
+    rows = _records(tmp_path / "c")
+    assert result.respawns == 1 and result.errors == 1
+    assert rows[(task, 0)][1] == "error" and "exit code 7" in rows[(task, 0)][2]
+    assert rows[(task, 1)][1] == "ok"  # the replacement worker played the next episode
+
+
+@pytest.mark.slow
+@needs_metaworld
 def test_scripted_and_random_through_the_harness(tmp_path: Path) -> None:
     suite = load_suite("metaworld")
     task = suite.held_out[2]
