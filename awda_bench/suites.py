@@ -33,6 +33,10 @@ from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
 SUITES_DIR = Path(__file__).resolve().parent.parent / "tasks"
 """Where the suite definition files live (``tasks/`` at the project root)."""
 
+SIMULATORS = ("maniskill", "metaworld")
+"""What a suite's episodes run on: the project's ManiSkill envs (in the project's environment), or
+the ``metaworld`` package (in an environment of its own, see :mod:`awda_bench.runtimes`)."""
+
 
 @dataclass(frozen=True)
 class TaskDef:
@@ -63,6 +67,9 @@ class CameraDef:
     """Image height [px] (reference pick-and-place: 240)."""
     width: int = 320
     """Image width [px] (reference pick-and-place: 320)."""
+    name: str | None = None
+    """The simulator's own camera to render from (Meta-World: ``"corner2"``); ``None`` for the
+    camera the suite's env defines itself (the ManiSkill suites)."""
 
 
 @dataclass(frozen=True)
@@ -92,6 +99,9 @@ class Suite:
     episode_unit: str = "task"
     """``"task"``: ``episodes_per_task`` per held-out task; ``"family"``: that many per family,
     variations cycled deterministically (MOSAIC, Table S4)."""
+    simulator: str = "maniskill"
+    """One of :data:`SIMULATORS`. ``"metaworld"``: ``env_id`` is ``"metaworld"`` and each task's
+    :attr:`TaskDef.name` is the Meta-World env it runs (``"sweep-into-v3"``)."""
 
     @property
     def horizon_s(self) -> float:
@@ -163,6 +173,7 @@ def load_suite(name: str, directory: Path = SUITES_DIR) -> Suite:
             camera=CameraDef(**raw.get("camera", {})),
             path=path,
             episode_unit=str(raw.get("episode_unit", "task")),
+            simulator=str(raw.get("simulator", SIMULATORS[0])),
         )
     except (KeyError, TypeError, ValueError) as exc:
         raise CorruptFileError(
@@ -176,6 +187,10 @@ def load_suite(name: str, directory: Path = SUITES_DIR) -> Suite:
             raise UsageError(
                 f"suite file {path}: held-out task {i} is not among its tasks {indices}"
             )
+    if suite.simulator not in SIMULATORS:
+        raise CorruptFileError(
+            f"suite file {path}: simulator {suite.simulator!r} is not one of {list(SIMULATORS)}"
+        )
     if suite.name != name:
         raise CorruptFileError(
             f"suite file {path} declares name {suite.name!r}; rename one of them"

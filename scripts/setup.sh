@@ -6,8 +6,10 @@
 #   bash scripts/setup.sh         # set up only
 #
 # Set-up = (1) a Vulkan device SAPIEN accepts (on a GPU-less Debian 12 that is Mesa >= 24.3 from
-# bookworm-backports), (2) tox, (3) the project's environment .venv (owned by tox, shared by all
-# tox envs so torch is installed once). Every step is idempotent.
+# bookworm-backports), (2) tox, (3) the Meta-World workers' environment .venv-metaworld and the EGL
+# libraries MuJoCo renders with (metaworld pins a MuJoCo the project's mink refuses, see
+# awda_bench/runtimes.py), (4) the project's environment .venv (owned by tox, shared by all tox
+# envs so torch is installed once). Every step is idempotent.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 what="${1:-setup}"
@@ -81,8 +83,52 @@ ensure_tox() {
     || "$PY" -m pip install -q --user --disable-pip-version-check "${TOX_REQS[@]}"
 }
 
+has_lib() { ldconfig -p 2>/dev/null | grep -q "$1"; }
+
+ensure_egl() {
+  # MuJoCo renders headless through EGL (Mesa's software renderer without a GPU)
+  if has_lib 'libEGL.so.1' && has_lib 'libEGL_mesa.so.0'; then return; fi
+  local sudo=""
+  if [ "$(id -u)" != 0 ]; then
+    if command -v sudo >/dev/null 2>&1 && sudo -n true 2>/dev/null; then sudo="sudo -n"; else
+      log "ERROR: Meta-World renders through EGL: as root run apt-get install -y libegl1 libegl-mesa0 libgl1-mesa-dri"
+      exit 1
+    fi
+  fi
+  local target=()
+  if grep -rqs bookworm-backports /etc/apt/sources.list /etc/apt/sources.list.d/; then target=(-t bookworm-backports); fi
+  log "installing the EGL libraries MuJoCo renders with"
+  $sudo apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${target[@]}" libegl1 libegl-mesa0 libgl1-mesa-dri >/dev/null
+}
+
+MW_VENV=.venv-metaworld
+MW_REQS=requirements-metaworld.txt
+
+ensure_metaworld_venv() {
+  if [ -n "${AWDA_SKIP_METAWORLD_SETUP:-}" ]; then log "Meta-World environment skipped (AWDA_SKIP_METAWORLD_SETUP)"; return; fi
+  ensure_egl
+  local want; want="$(sha256sum "$MW_REQS" | cut -d' ' -f1)"
+  if [ -x "$MW_VENV/bin/python" ] && [ "$(cat "$MW_VENV/.requirements.sha256" 2>/dev/null)" = "$want" ]; then
+    log "$MW_VENV present"; return
+  fi
+  log "making $MW_VENV (metaworld and its MuJoCo; see $MW_REQS)"
+  if [ ! -x "$MW_VENV/bin/python" ]; then
+    # the standard library's venv first: virtualenv >= 21 also writes a PEP-832 ".venv" redirect
+    # file beside pyproject.toml, which would stand where tox makes the project's .venv
+    if ! "$PY" -m venv "$MW_VENV" 2>/dev/null; then
+      rm -rf "$MW_VENV"
+      "$PY" -m virtualenv -q --no-venv-redirect "$MW_VENV" 2>/dev/null || "$PY" -m virtualenv -q "$MW_VENV"
+    fi
+  fi
+  "$MW_VENV/bin/python" -m pip install -q --disable-pip-version-check -r "$MW_REQS"
+  MUJOCO_GL=egl "$MW_VENV/bin/python" -c 'import metaworld, mujoco' >/dev/null
+  echo "$want" > "$MW_VENV/.requirements.sha256"
+}
+
 ensure_renderer
 ensure_tox
+ensure_metaworld_venv
 case "$what" in
   setup) "$PY" -m tox run -e py --notest ;;
   quick) "$PY" -m tox run -e quick ;;

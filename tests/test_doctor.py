@@ -29,6 +29,9 @@ def test_doctor_reports_the_device_and_writes_a_frame(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     assert "render device" in result.stdout
     assert "sapien" in result.stdout and "mink" in result.stdout
+    assert (
+        ".venv-metaworld" in result.stdout
+    )  # the Meta-World workers' environment, or how to make it
     assert frame.is_file() and frame.stat().st_size > 1000
 
 

@@ -14,6 +14,8 @@ throughput      ``bench harness``: episodes/minute per worker count and backend,
 episode_cost    ``bench episode-cost``: wall time, rendered frames and inference of one episode
 inference       a learned model's forward-pass latency
 soft_dtw        the multi-waypoint Soft-DTW loss per implementation (and its share of a step)
+metaworld       Meta-World frames (the models' render settings vs fast) and the scripted policies'
+                lengths, in ``.venv-metaworld``
 ==============  ===================================================================================
 
 :mod:`awda_bench.commands.bench` wires them to the command line, importing only the chosen one.

@@ -11,6 +11,8 @@ imports the chosen one alone, so the CLI starts fast):
     inference   waypoint network forward latency
     soft-dtw    the multi-waypoint Soft-DTW loss per implementation (and its share of a step)
     serve       a served policy: loopback round trip per step, episodes/min served vs in-process
+    metaworld   Meta-World frames (models' own render settings vs fast) and expert lengths, run in
+                .venv-metaworld
 """
 
 from __future__ import annotations
@@ -61,6 +63,12 @@ BENCHMARKS: dict[str, tuple[str, str, str, bool]] = {
         False,
     ),
     "serve": ("awda_bench.benchmarks.serve", "add_serve_args", "run_serve_bench", True),
+    "metaworld": (
+        "awda_bench.benchmarks.metaworld",
+        "add_metaworld_args",
+        "run_metaworld_bench",
+        False,
+    ),
 }
 
 
@@ -68,7 +76,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser = subparsers.add_parser(
         "bench",
         help="speed benchmarks (controller, env, primitives, harness, episode-cost, inference, "
-        "soft-dtw, serve)",
+        "soft-dtw, serve, metaworld)",
         description="Run one benchmark; 'bench NAME --help' lists its options.",
     )
     parser.add_argument("benchmark", metavar="BENCHMARK", help=f"one of: {', '.join(BENCHMARKS)}")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from awda_bench.errors import UsageError
 from awda_bench.experts import EMBODIMENT_NAMES
 
 
@@ -41,6 +42,11 @@ def run(args: argparse.Namespace) -> int:
     from awda_bench.suites import load_suite
 
     suite = load_suite(args.suite)
+    if suite.simulator != "maniskill":
+        raise UsageError(
+            f"demo is not offered on suite {suite.name!r} yet (it plays in workers of its own "
+            f"environment); `run --suite {suite.name}` plays its episodes"
+        )
     frames, trajectory = record_demo(
         suite, args.task, args.seed, args.embodiment, render_every=args.render_every, frames=True
     )

@@ -52,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
         except importlib.metadata.PackageNotFoundError:
             version = "not installed"
         print(f"{name:<13} {version}")
+    print(f"meta-world    {metaworld_environment()}")
 
     import torch
 
@@ -76,6 +77,19 @@ def run(args: argparse.Namespace) -> int:
     )
     print("ok")
     return 0
+
+
+def metaworld_environment() -> str:
+    """What the Meta-World suites' workers would start from (they need an environment of their
+    own): its packages, or how to make it."""
+    from awda_bench.runtimes import SECOND_VENVS, MissingEnvironmentError, worker_versions
+
+    try:
+        versions = worker_versions("metaworld")
+    except MissingEnvironmentError:
+        return f"{SECOND_VENVS['metaworld']} missing (Meta-World suites): bash scripts/setup.sh"
+    listed = ", ".join(f"{k.split(' ', 1)[1]} {v}" for k, v in sorted(versions.items()))
+    return f"{SECOND_VENVS['metaworld']}: {listed}"
 
 
 def render_test_frame() -> tuple[np.ndarray, float]:

@@ -16,7 +16,7 @@ from awda_bench.harness.worker_pool import DEFAULT_ENV_FACTORY
 from awda_bench.policies.tosvi_policy import ACTION_SELECTS, tosvi_method_name
 from awda_bench.primitives.config import CENTRE_SUFFIX, GRASP_SELECTS
 from awda_bench.serving.remote_policy import DEFAULT_TIMEOUT_S
-from awda_bench.suites import SUITES_DIR, available_suites
+from awda_bench.suites import SIMULATORS, SUITES_DIR, available_suites, load_suite
 
 QUICK_EPISODES = 3
 """``--quick``: episodes per evaluation unit (one snapshot)."""
@@ -198,6 +198,11 @@ def config_from_args(args: argparse.Namespace) -> SweepConfig:
 
 def run(args: argparse.Namespace) -> int:
     config = config_from_args(args)
+    if args.videos and load_suite(config.suite, config.suites_dir).simulator != SIMULATORS[0]:
+        raise UsageError(
+            f"--videos is not offered on suite {config.suite!r} yet (videos are rendered in this "
+            "process, whose environment lacks its simulator); drop --videos"
+        )
     result = run_sweep(config)
     print(
         f"{config.suite}/{config.label or config.method}: {result.planned} episodes planned, "

@@ -1,6 +1,8 @@
 """The single function that builds a suite's env; workers call it once and reuse the env.
 
-Real suites name a ManiSkill env id registered by :mod:`awda_bench.envs`. An id of the form
+Real suites name a ManiSkill env id registered by :mod:`awda_bench.envs`; a Meta-World suite
+(``simulator = "metaworld"``) gets one :class:`awda_bench.metaworld.env.MetaWorldEnv` serving all
+its tasks (built only inside a worker started from ``.venv-metaworld``). An id of the form
 ``"some.module:Env-v0"`` makes gymnasium import ``some.module`` first (how tests plug in a fake
 env through the very same path).
 """
@@ -30,6 +32,10 @@ def make_env(suite: Suite, *, env_id: str | None = None, render_mode: str | None
     ``render_mode="rgb_array"`` lets :func:`env.render` return frames (videos); rendering is only
     done when asked for.
     """
+    if suite.simulator == "metaworld":
+        from awda_bench.metaworld.env import MetaWorldEnv
+
+        return MetaWorldEnv(suite, render_mode=render_mode)
     env_id = env_id or suite.env_id
     if ":" not in env_id:
         try:

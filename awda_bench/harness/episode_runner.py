@@ -24,11 +24,18 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
-from awda_bench.episode import EpisodeContext, EpisodeSpec, Policy, is_privileged, seed_globals
+from awda_bench.episode import (
+    EpisodeContext,
+    EpisodeSpec,
+    Observations,
+    Policy,
+    is_privileged,
+    seed_globals,
+)
 from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
 from awda_bench.harness.observations import SimObservations
 from awda_bench.suites import Suite
@@ -50,6 +57,26 @@ def info_flag(info: dict[str, Any], key: str) -> bool | None:
 def fresh_scene_options(suite: Suite, task: int) -> dict[str, Any]:
     """``env.reset`` options that start suite task ``task`` in a rebuilt scene (no PhysX history)."""
     return {"task": suite.task(task).reset_task, "reconfigure": True}
+
+
+class HarnessObservations(Observations, Protocol):
+    """An episode's observations as the harness holds them: told when the first step is done
+    (``first_frame`` is gone after it)."""
+
+    def mark_stepped(self) -> None: ...
+
+
+def episode_observations(
+    env: Any, spec: EpisodeSpec, suite: Suite, extras: dict[str, Any]
+) -> HarnessObservations:
+    """What an observation-only policy sees of the episode on ``env`` (unwrapped): the env's own
+    ``episode_observations(spec, extras)`` where it has one (Meta-World), else
+    :class:`SimObservations` over the ManiSkill env."""
+    own = getattr(env, "episode_observations", None)
+    if own is not None:
+        observations: HarnessObservations = own(spec, extras)
+        return observations
+    return SimObservations(env, spec, suite, extras)
 
 
 def run_episode(
@@ -76,7 +103,7 @@ def run_episode(
         on_frame(env)
     t0 = time.perf_counter()
     extras = {} if extras is None else extras
-    observations = SimObservations(env.unwrapped, spec, suite, extras)
+    observations = episode_observations(env.unwrapped, spec, suite, extras)
     privileged = is_privileged(policy)
     policy.reset(
         EpisodeContext(

@@ -17,6 +17,11 @@ is the same :class:`~awda_bench.harness.job_pool.JobPool` on Ray actors.
       ... watchdog: a job older than job_timeout_s(job) -> kill worker, lost(job) result, respawn
       None -------------------------------->   executor.close(), exit
 
+Workers are spawned from this interpreter, or, when :attr:`ProcessPool.python` names another
+(a suite whose simulator needs an environment of its own, :mod:`awda_bench.runtimes`), started
+from that one (:mod:`awda_bench.harness.interpreter_process`); the conversation
+(:mod:`awda_bench.harness.worker_loop`) is the same.
+
 A worker that dies mid-job is replaced and the job ends as ``lost(job, ...)``; a worker that
 cannot build its executor, or does not within ``start_timeout_s``, stops the run
 (:class:`~awda_bench.harness.job_pool.WorkerStartError`).
@@ -27,40 +32,15 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import time
-import traceback
 from collections import deque
 from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
 from multiprocessing.connection import Connection, wait
 from typing import Any, ClassVar
 
+from awda_bench.harness.interpreter_process import start_in_interpreter
 from awda_bench.harness.job_pool import THREAD_VARS, Executor, J, JobPool, R, WorkerStartError
-
-
-def _worker_main(conn: Connection, build: Callable[[Any], Executor], config: Any) -> None:
-    try:
-        executor = build(config)
-    except BaseException as exc:
-        conn.send(("fatal", f"{type(exc).__name__}: {exc}", traceback.format_exc()))
-        conn.close()
-        return
-    conn.send(("ready", os.getpid()))
-    try:
-        while True:
-            try:
-                job = conn.recv()
-            except EOFError:
-                break  # the parent was killed: nobody to report to, exit quietly
-            if job is None:
-                break
-            result = executor.play(job)
-            try:
-                conn.send(("result", result))
-            except BrokenPipeError:
-                break  # the parent was killed mid-job; the job runs again on resume
-    finally:
-        executor.close()
-        conn.close()
+from awda_bench.harness.worker_loop import serve_jobs
 
 
 @contextmanager
@@ -78,15 +58,26 @@ def single_threaded_children() -> Iterator[None]:
                 os.environ[k] = v
 
 
+def spawn_here(build: Callable[[Any], Executor], config: Any) -> tuple[Connection, Any]:
+    """A worker spawned from this interpreter (``multiprocessing``'s spawn context): its end of
+    the pipe and its process."""
+    ctx = mp.get_context("spawn")
+    conn, child = ctx.Pipe(duplex=True)
+    process = ctx.Process(target=serve_jobs, args=(child, build, config), daemon=True)
+    with single_threaded_children():
+        process.start()
+    child.close()
+    return conn, process
+
+
 class _Slot:
     """One worker process as the parent tracks it."""
 
-    def __init__(self, ctx: Any, build: Callable[[Any], Executor], config: Any) -> None:
-        self.conn, child = ctx.Pipe(duplex=True)
-        self.process = ctx.Process(target=_worker_main, args=(child, build, config), daemon=True)
-        with single_threaded_children():
-            self.process.start()
-        child.close()
+    def __init__(self, conn: Connection, process: Any) -> None:
+        self.conn = conn
+        self.process: Any = process
+        """A ``multiprocessing`` process, or an
+        :class:`~awda_bench.harness.interpreter_process.InterpreterProcess` (the same methods)."""
         self.ready = False
         self.job: Any = None
         self.since = time.monotonic()
@@ -112,8 +103,15 @@ class ProcessPool(JobPool[J, R]):
 
     _queue: deque[J]
 
+    python: str | None = None
+    """Interpreter the workers start from (another virtual environment's ``bin/python``, see
+    :mod:`awda_bench.runtimes`); ``None``: spawned from this one."""
+
     def _spawn(self) -> _Slot:
-        return _Slot(mp.get_context("spawn"), self.build, self.config)
+        if self.python is None:
+            return _Slot(*spawn_here(self.build, self.config))
+        conn, process = start_in_interpreter(self.python, self.build, self.config)
+        return _Slot(conn, process)
 
     def _deadline(self, slot: _Slot) -> float:
         """When the watchdog (a job) or the start-up limit (no job yet) ends ``slot``'s wait."""

@@ -39,8 +39,10 @@ from awda_bench.harness.worker_pool import (
     WorkerConfig,
     run_inline,
 )
+from awda_bench.metaworld_tasks import check_task_names
+from awda_bench.runtimes import worker_python, worker_versions
 from awda_bench.serving.remote_policy import DEFAULT_TIMEOUT_S
-from awda_bench.suites import SUITES_DIR, Suite, load_suite
+from awda_bench.suites import SIMULATORS, SUITES_DIR, Suite, load_suite
 
 VERSIONED_PACKAGES = (
     "awda_bench",
@@ -201,6 +203,23 @@ def sweep_protocol(config: SweepConfig, suite: Suite) -> EvalProtocol:
     return protocol
 
 
+def check_runtime(suite: Suite, config: SweepConfig) -> None:
+    """A suite whose workers need an environment of their own (Meta-World): its task names are
+    right, the workers are local processes (``--workers 0`` would play in this process, whose
+    environment lacks the simulator; Ray actors start from the cluster's), and that environment is
+    there (else one line naming ``bash scripts/setup.sh``)."""
+    if suite.simulator == "metaworld":
+        check_task_names(suite)
+    if suite.simulator == SIMULATORS[0]:
+        return
+    if config.workers == 0 or config.backend != "local":
+        raise UsageError(
+            f"suite {suite.name!r} runs in its own environment's worker processes: use "
+            "--backend local with --workers >= 1"
+        )
+    worker_python(suite.simulator)
+
+
 def prepare_sweep(config: SweepConfig) -> SweepPlan:
     """Validate the whole sweep; raises a one-line error on bad input and writes nothing."""
     suite = load_suite(config.suite, config.suites_dir)
@@ -218,6 +237,7 @@ def prepare_sweep(config: SweepConfig) -> SweepPlan:
     if config.workers < 0:
         raise UsageError(f"--workers must be >= 0 (got {config.workers})")
     check_backend(config.backend, config.workers, config.ray_address)
+    check_runtime(suite, config)
     if config.episode_timeout_s <= 0:
         raise UsageError(f"--episode-timeout must be positive (got {config.episode_timeout_s})")
     method = sweep_method(config)
@@ -259,7 +279,7 @@ def run_sweep(config: SweepConfig) -> SweepResult:
             plan.snapshots,
             plan.expected_per_snapshot,
             config.command,
-            software_versions(),
+            {**software_versions(), **worker_versions(plan.suite.simulator)},
             plan.suite.display_name,
             plan.method.privileged,
         )

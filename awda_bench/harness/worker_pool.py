@@ -3,7 +3,8 @@
 What a worker holds is an :class:`EpisodeExecutor`; :class:`WorkerPool` runs it on the local
 process pool (:mod:`awda_bench.harness.process_pool`, shared with ``collect``)::
 
-    parent                                   worker k (spawned; OMP_NUM_THREADS=1)
+    parent                                   worker k (spawned, or started from the suite's own
+                                             environment, see awda_bench.runtimes; OMP_NUM_THREADS=1)
       start ------------------------------->   env = make_env(suite)      (once per env id)
             <----------------------- ("ready", pid)
       Job --------------------------------->   policy cached per (method, snapshot)
@@ -32,6 +33,7 @@ from awda_bench.harness.episode_record import STATUS_ERROR, EpisodeRecord
 from awda_bench.harness.episode_runner import FrameHook, run_episode
 from awda_bench.harness.methods import MethodSpec, SnapshotRef, make_policy, resolve
 from awda_bench.harness.process_pool import ProcessPool
+from awda_bench.runtimes import worker_python
 from awda_bench.suites import Suite, load_suite
 
 DEFAULT_ENV_FACTORY = "awda_bench.harness.env_factory:make_env"
@@ -175,6 +177,7 @@ class WorkerPool(ProcessPool[Job, EpisodeRecord]):
     def __init__(self, config: WorkerConfig, workers: int, suite: Suite) -> None:
         self.suite = suite
         super().__init__(EpisodeExecutor, config, workers, **pool_settings(config, suite))
+        self.python = worker_python(suite.simulator)
 
 
 def run_inline(

@@ -1,4 +1,5 @@
-"""``scripted``: the suite's privileged scripted expert (``awda_bench.experts``) as a method."""
+"""``scripted``: the suite's privileged scripted expert (``awda_bench.experts``; on Meta-World the
+package's own, :mod:`awda_bench.metaworld.expert`) as a method."""
 
 from __future__ import annotations
 
@@ -7,6 +8,18 @@ from typing import Any
 import numpy as np
 
 from awda_bench.episode import EpisodeContext, Policy
+
+
+def _expert_for(ctx: EpisodeContext) -> Policy:
+    """The agent-embodiment expert of ``ctx``'s suite: Meta-World's own scripted policies on a
+    Meta-World env (imported only there: they need ``.venv-metaworld``), else ours."""
+    if getattr(ctx.env, "simulator", None) == "metaworld":
+        from awda_bench.metaworld.expert import MetaWorldExpert
+
+        return MetaWorldExpert()
+    from awda_bench.experts import make_expert
+
+    return make_expert(ctx.spec.suite, embodiment="agent")
 
 
 class ScriptedPolicy:
@@ -21,10 +34,8 @@ class ScriptedPolicy:
         self._suite: str | None = None
 
     def reset(self, ctx: EpisodeContext) -> None:
-        from awda_bench.experts import make_expert
-
         if self._expert is None or self._suite != ctx.spec.suite:
-            self._expert = make_expert(ctx.spec.suite, embodiment="agent")
+            self._expert = _expert_for(ctx)
             self._suite = ctx.spec.suite
         self._expert.reset(ctx)
 

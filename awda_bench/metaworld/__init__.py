@@ -1,0 +1,20 @@
+"""Meta-World (the ``metaworld`` package, its Sawyer arm and 50 tasks) as a harness simulator.
+
+Everything here runs inside workers started from ``.venv-metaworld`` (see
+:mod:`awda_bench.runtimes`: Meta-World's MuJoCo cannot share the project's environment); nothing
+in the main environment imports this package (the task names it checks suite files against are
+:mod:`awda_bench.metaworld_tasks`). Rendering is headless: MuJoCo's EGL backend (Mesa's
+software renderer without a GPU) unless ``MUJOCO_GL`` says otherwise, chosen here before anything
+imports ``mujoco``.
+
+- :mod:`.layout`: one task's env and the seeded layouts;
+- :mod:`.renderer`: one MuJoCo renderer per process, any camera, RGB upright and depth in metres;
+- :mod:`.env`: a suite's tasks behind the harness's env interface;
+- :mod:`.observations`: what an observation-only policy sees;
+- :mod:`.expert`: the package's scripted policies as the ``scripted`` method;
+- :mod:`.demo`: the demonstration video (the expert in the demo layout).
+"""
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
