@@ -172,6 +172,14 @@ def _records(out: Path) -> dict[tuple[int, int], tuple[Any, ...]]:
     return {(r[0], r[1]): r[2:] for r in rows}
 
 
+@pytest.fixture
+def probes_importable(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The probe policies (tests/metaworld_probe.py) must import in the workers too."""
+    monkeypatch.setenv(
+        "PYTHONPATH", os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])
+    )
+
+
 def _sweep(out: Path, method: str, workers: int, tasks: tuple[int, ...], episodes: int) -> Any:
     return run_sweep(
         SweepConfig(
@@ -189,12 +197,8 @@ def _sweep(out: Path, method: str, workers: int, tasks: tuple[int, ...], episode
 @pytest.mark.slow
 @needs_metaworld
 def test_layouts_are_seeded_identical_across_workers_and_different_across_seeds(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, probes_importable: None
 ) -> None:
-    # the probe policy (tests/metaworld_probe.py) must import in the workers too
-    monkeypatch.setenv(
-        "PYTHONPATH", os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])
-    )
     suite = load_suite("metaworld")
     tasks = (suite.held_out[0], suite.held_out[4])
     first = _sweep(tmp_path / "a", "metaworld_probe:ProbePolicy", 1, tasks, 2)
@@ -220,11 +224,8 @@ def test_layouts_are_seeded_identical_across_workers_and_different_across_seeds(
 @pytest.mark.slow
 @needs_metaworld
 def test_the_demo_is_the_expert_in_another_layout_and_leaves_the_episode_as_it_was(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, probes_importable: None
 ) -> None:
-    monkeypatch.setenv(
-        "PYTHONPATH", os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])
-    )
     suite = load_suite("metaworld")
     task = suite.held_out[0]  # button-press: the button goes in, the frame changes
     result = _sweep(tmp_path / "d", "metaworld_probe:DemoProbePolicy", 1, (task,), 1)
@@ -239,11 +240,8 @@ def test_the_demo_is_the_expert_in_another_layout_and_leaves_the_episode_as_it_w
 @pytest.mark.slow
 @needs_metaworld
 def test_a_worker_that_dies_is_recorded_and_replaced(
-    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+    tmp_path: Path, probes_importable: None
 ) -> None:
-    monkeypatch.setenv(
-        "PYTHONPATH", os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])
-    )
     task = load_suite("metaworld").held_out[1]
     result = _sweep(tmp_path / "c", "metaworld_probe:CrashingPolicy", 1, (task,), 2)
     rows = _records(tmp_path / "c")
