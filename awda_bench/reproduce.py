@@ -41,10 +41,10 @@ from typing import Any
 
 from awda_bench.data.config import CollectConfig
 from awda_bench.errors import AwdaError, CorruptFileError, UnknownChoiceError, UsageError
-from awda_bench.harness.paper_values import PAPER_S3_PICK_PLACE, PAPER_S4
+from awda_bench.harness.paper_values import PAPER_S3_PICK_PLACE, PAPER_S4, paper_analysis_text
 from awda_bench.harness.sweep import SweepConfig
 from awda_bench.primitives.config import CENTRE_SUFFIX, GRASP_SELECTS
-from awda_bench.training.columns import COLUMNS, Column
+from awda_bench.training.columns import TRAINABLE, Column
 
 SUITES: tuple[str, ...] = ("pick_place", "mosaic")
 """Suites ``reproduce`` knows how to lay out."""
@@ -59,14 +59,42 @@ class RunInterrupted(AwdaError):
 
 
 def column_key(column: Column) -> str:
-    """``full-1``, ``no-adm``, ``tosvi``, ...: the ``--columns`` name and the method label."""
+    """``full-1``, ``no-adm``, ``tosvi``, ``tosvi-no-frame-stack``, ...: the ``--columns`` name
+    and the method label (an ablation of ``awda`` is named by the ablation alone)."""
     if column.ablation is not None:
-        return column.ablation
+        return column.ablation if column.method == "awda" else f"{column.method}-{column.ablation}"
     return "full-1" if column.method == "awda" else column.method
 
 
-COLUMN_KEYS: dict[str, Column] = {column_key(c): c for c in COLUMNS}
-"""``--columns`` names, in Table S3's order."""
+COLUMN_KEYS: dict[str, Column] = {column_key(c): c for c in TRAINABLE}
+"""Trained ``--columns`` names: Table S3's in its order, then the §S3 analysis's network."""
+
+
+@dataclass(frozen=True)
+class EvalVariant:
+    """A ``--columns`` name that trains nothing: another ``run --method`` over a trained column's
+    snapshots (the supplementary's §S3 analysis evaluates T-OSVI's with the mean and the mode
+    action)."""
+
+    name: str
+    """Its title in tables."""
+    trained: str
+    """The :data:`COLUMN_KEYS` column whose snapshots it plays (it must be in ``--columns`` too)."""
+    method: str
+    """The ``run --method`` that plays them."""
+
+
+EVAL_VARIANTS: dict[str, EvalVariant] = {
+    "tosvi-mean": EvalVariant("T-OSVI, mean action", "tosvi", "tosvi-mean"),
+    "tosvi-mode": EvalVariant("T-OSVI, mode action", "tosvi", "tosvi-mode"),
+}
+"""Evaluation-only ``--columns`` names."""
+
+
+def column_title(key: str) -> str:
+    """``Full-1``, ``T-OSVI, mean action``, ...: a ``--columns`` name's title."""
+    return EVAL_VARIANTS[key].name if key in EVAL_VARIANTS else COLUMN_KEYS[key].name
+
 
 DEFAULT_COLUMNS: tuple[str, ...] = ("full-1", "tosvi")
 
@@ -108,11 +136,12 @@ class Costs:
     """Per step of a frozen-backbone recipe over cached features (``small``: 0.5-0.6 s alone,
     0.75-0.84 s beside another job; batch 16, 2 threads, 2026-12-02)."""
     frozen_tosvi_step_s: dict[str, float] = field(
-        default_factory=lambda: {"tosvi": 5.3, "tosvi-depth": 10.7}
+        default_factory=lambda: {"tosvi": 0.6, "tosvi-depth": 1.2}
     )
-    """Per T-OSVI step over cached maps pooled 2x2 (``small``: batch 16, 1 thread at nice 19
-    beside a 2-thread job, median of 20 steps on pick-place task 0; tosvi-depth trains its depth
-    ResNet-18 over 96 wrist depth images a step; 2026-12-02)."""
+    """Per T-OSVI step over cached maps pooled 2x2 (``small``: batch 16, 2 threads, a synthetic
+    batch, session 12, after the attention fix that took it from 2.0 s). tosvi-depth (which trains
+    its depth ResNet-18 over 96 wrist depth images a step) is not measured since that fix: it is
+    scaled by the ratio measured before it (10.7 s vs 5.3 s at 1 thread beside a 2-thread job)."""
     agent_episode_steps: float = 62.4
     """Mean steps of a kept pick-place agent episode (T-OSVI caches every agent frame; the
     20-per-task train split: 17,472 steps in 280 episodes)."""
@@ -177,10 +206,17 @@ def parse_columns(text: str) -> tuple[str, ...]:
     if not names:
         raise UsageError("--columns is empty; name at least one, e.g. full-1,tosvi")
     for n in names:
-        if n not in COLUMN_KEYS:
-            raise UnknownChoiceError("column", n, tuple(COLUMN_KEYS))
+        if n not in COLUMN_KEYS and n not in EVAL_VARIANTS:
+            raise UnknownChoiceError("column", n, (*COLUMN_KEYS, *EVAL_VARIANTS))
     if len(set(names)) != len(names):
         raise UsageError(f"--columns names a column twice: {text}")
+    for n in names:
+        if n in EVAL_VARIANTS and EVAL_VARIANTS[n].trained not in names:
+            trained = EVAL_VARIANTS[n].trained
+            raise UsageError(
+                f"--columns {n} plays the {trained} column's snapshots: add {trained} to "
+                f"--columns, e.g. --columns {trained},{n}"
+            )
     return names
 
 
@@ -379,7 +415,8 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
     tasks, units = _eval_tasks(config.suite, config.hold_out)
     episodes = config.episodes if config.episodes is not None else suite.episodes_per_task
     runs = out / "runs"
-    for key in config.columns:
+    trained_keys = [k for k in config.columns if k not in EVAL_VARIANTS]
+    for key in trained_keys:
         column = COLUMN_KEYS[key]
         ckpt = out / "checkpoints" / key
         argv = [
@@ -459,6 +496,29 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
                     fit,
                 )
             )
+    for key in (k for k in config.columns if k in EVAL_VARIANTS):
+        variant = EVAL_VARIANTS[key]
+        ckpt = out / "checkpoints" / variant.trained
+        evaluate = SweepConfig(
+            suite=config.suite, method=variant.method, out=runs, checkpoints=ckpt,
+            snapshots=config.snapshots, episodes=config.episodes, workers=config.workers,
+            tasks=tuple(tasks), progress=config.progress, label=key,
+        )  # fmt: skip
+        trained = _steps_done(ckpt) >= target
+        remaining = _eval_remaining(evaluate) if trained else None
+        n_eval = config.snapshots * episodes * units
+        stages.append(
+            Stage(
+                f"evaluate {key}",
+                _run_argv(evaluate),
+                (n_eval if remaining is None else remaining)
+                * COSTS.eval_episode_s[COLUMN_KEYS[variant.trained].arch]
+                / config.workers,
+                remaining == 0,
+                f"{variant.trained}'s snapshots with --method {variant.method}",
+                evaluate,
+            )
+        )  # fmt: skip
     stages.append(
         Stage(
             "report",
@@ -753,15 +813,15 @@ def write_summary(config: ReproduceConfig) -> Path:
     for key in config.columns:
         c = cells.get(key)
         paper = (
-            PAPER_S3_PICK_PLACE.get(key, "–")
+            PAPER_S3_PICK_PLACE.get(key) or paper_analysis_text(key) or "–"
             if config.suite == "pick_place"
             else PAPER_S4.get((key, config.hold_out or ""), "–")
         )
         if c is None:
-            lines.append(f"| {COLUMN_KEYS[key].name} (`{key}`) | not evaluated | | | {paper} |")
+            lines.append(f"| {column_title(key)} (`{key}`) | not evaluated | | | {paper} |")
         else:
             lines.append(
-                f"| {COLUMN_KEYS[key].name} (`{key}`) | {_fmt(c['mean'], c['se'])} | "
+                f"| {column_title(key)} (`{key}`) | {_fmt(c['mean'], c['se'])} | "
                 f"{c['snapshots']}/{c['snapshots_planned']} | {c['episodes']} | {paper} |"
             )
     fit_summary = report / "train-tasks" / "summary.json"

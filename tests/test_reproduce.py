@@ -185,6 +185,33 @@ def test_columns_parse_in_the_given_order() -> None:
     assert parse_columns("tosvi, full-1") == ("tosvi", "full-1")
 
 
+def test_the_s3_analysis_columns_train_a_stack_of_one_and_replay_tosvis_snapshots(
+    tmp_path: Path,
+) -> None:
+    # the mean / mode columns train nothing: they play tosvi's snapshots, so tosvi must be named
+    with pytest.raises(UsageError, match="add tosvi to --columns"):
+        parse_columns("full-1,tosvi-mean")
+    columns = parse_columns("tosvi-mode,tosvi,tosvi-no-frame-stack")
+    stages = plan_stages(
+        ReproduceConfig(suite="pick_place", out=tmp_path, columns=columns, recipe="small")
+    )
+    names = [s.name for s in stages]
+    assert "train tosvi-mode" not in names
+    # played after everything trains, whatever order --columns gives
+    assert names.index("evaluate tosvi-mode") > names.index("train tosvi")
+    assert names.index("evaluate tosvi-mode") > names.index("train tosvi-no-frame-stack")
+    by_name = {s.name: s.argv for s in stages}
+    mode = by_name["evaluate tosvi-mode"]
+    assert mode[mode.index("--method") + 1] == "tosvi-mode"
+    assert mode[mode.index("--label") + 1] == "tosvi-mode"
+    assert mode[mode.index("--checkpoints") + 1] == str(tmp_path / "checkpoints" / "tosvi")
+    stack = by_name["train tosvi-no-frame-stack"]
+    assert stack[:3] == ["train", "--method", "tosvi"]
+    assert stack[stack.index("--ablation") + 1] == "no-frame-stack"
+    played = by_name["evaluate tosvi-no-frame-stack"]
+    assert played[played.index("--method") + 1] == "tosvi"
+
+
 # --- running stages: the stage-time log, signals, one invocation per directory -----------------
 
 PYTHON_C = (sys.executable, "-c")

@@ -16,7 +16,7 @@ from awda_bench.errors import UsageError
 from awda_bench.harness import paper_values
 from awda_bench.harness.aggregate import ALL, S4_FAMILIES, mean_se
 from awda_bench.harness.bootstrap_ci import outcomes, stratified_bootstrap_ci, stratified_mean
-from awda_bench.harness.results_index import LEARNED_KEYS, load_index
+from awda_bench.harness.results_index import ANALYSIS_KEYS, LEARNED_KEYS, load_index
 from awda_bench.harness.results_page import (
     CI,
     NOT_RUN,
@@ -368,7 +368,8 @@ def test_the_index_defaults_the_label_and_refuses_overlaps(tmp_path: Path) -> No
 def test_every_reproduce_column_is_a_page_column_and_shares_the_paper_values() -> None:
     from awda_bench import reproduce
 
-    assert set(reproduce.COLUMN_KEYS) == set(LEARNED_KEYS)
+    trained_or_played = set(reproduce.COLUMN_KEYS) | set(reproduce.EVAL_VARIANTS)
+    assert trained_or_played == set(LEARNED_KEYS) | set(ANALYSIS_KEYS)
     assert reproduce.PAPER_S3_PICK_PLACE is paper_values.PAPER_S3_PICK_PLACE
     assert reproduce.PAPER_S4 is paper_values.PAPER_S4
 
@@ -394,3 +395,29 @@ def test_rates_that_break_the_assumption_print_na_not_a_split(reports: Path) -> 
     row = build_results_page(reports / "results_sources.toml").failures.set_index("cell")
     assert row.loc["Full-1", "missed the grasp"].startswith("n/a: grasped 0.70")
     assert row.loc["Full-1", "placed (success)"].startswith("n/a")
+
+
+def test_the_s3_analysis_rows_read_reached_and_grasped_beside_the_papers_reaching(
+    reports: Path,
+) -> None:
+    write_source(
+        reports / "learned" / "tv", "pick_place", "tosvi-mean", [(2, 40), (6, 40)],
+        grasp=(0.4, 0.2, 0.1),
+    )  # fmt: skip
+    index = reports / "results_sources.toml"
+    index.write_text(
+        index.read_text().replace(
+            "scripted = ", 'tosvi-mean = { source = "learned/tv" }\nscripted = ', 1
+        )
+    )
+    page = build_results_page(index)
+    row = page.s3_analysis.loc["T-OSVI [1], mean action (`tosvi-mean`)"]
+    assert (row["reached"], row["grasped"], row[OURS]) == ("0.40", "0.20", "0.10 ± 0.05")
+    assert row["paper: reached"] == "0.11" and row["paper: success"] == "not given"
+    stack = page.s3_analysis.loc["T-OSVI [1], no frame-stack (`tosvi-no-frame-stack`)"]
+    assert (stack[OURS], stack["note"]) == (NOT_RUN, NOT_TRAINED)
+    assert stack["paper: reached"] == "0.12" and stack["paper: success"] == "0.01"
+    assert "§S3 analysis" in page.markdown()
+    # the analysis is pick-and-place's: an entry under another suite is refused in one line
+    with pytest.raises(UsageError, match="pick-and-place analysis"):
+        load_index(write_index(reports, '[mosaic]\ntosvi-mode = { source = "." }\n'))

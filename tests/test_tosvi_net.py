@@ -46,6 +46,22 @@ def test_shapes_and_loss_parts() -> None:
     assert model.arch == "tosvi"
 
 
+def test_a_stack_of_one_frame_has_no_inverse_model_and_still_learns() -> None:
+    # the supplementary's no-frame-stack T-OSVI (§S3): one frame, so no consecutive pairs
+    torch.manual_seed(0)
+    trunk = _config().trunk
+    model = TosviNet(TosviConfig(trunk=trunk, frame_stack=1))
+    data = SyntheticActionDataset(2, height_px=64, width_px=64, demo_frames=1, frame_stack=1)
+    batch = default_collate([data[i] for i in range(2)])
+    policy, inverse = model(batch["demo"], batch["frames"])
+    assert policy.shape == (2, 4, 9) and inverse.shape == (2, 0, 4, 9)
+    loss, info = model.compute_loss(batch)
+    assert info["inverse_nll"] == 0.0 and loss.item() == pytest.approx(info["policy_nll"])
+    loss.backward()
+    assert model.policy_head[0].weight.grad is not None
+    assert model.inverse_head[0].weight.grad is None  # nothing reaches the unused head
+
+
 def test_depth_variant_reads_depth_and_needs_it() -> None:
     torch.manual_seed(0)
     model = TosviNet(_config(use_depth=True)).eval()

@@ -20,7 +20,7 @@ from awda_bench.cli import main
 from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.models.snapshot import list_snapshots, load_snapshot
 from awda_bench.training.augment import BatchTreatment, step_generator
-from awda_bench.training.columns import ABLATIONS, COLUMNS, column_for
+from awda_bench.training.columns import ABLATIONS, COLUMNS, TRAINABLE, column_for
 from awda_bench.training.logbook import read_metrics
 from awda_bench.training.recipe import AugmentRecipe, load_recipe
 
@@ -55,9 +55,19 @@ def write_recipe(directory: Path, height: int = 64, name: str = "tiny.toml") -> 
 
 # ----------------------------------------------------------------------------- fast
 def test_every_column_is_one_method_ablation_pair() -> None:
-    pairs = {(c.method, c.ablation) for c in COLUMNS}
-    assert len(pairs) == len(COLUMNS) == 8
+    pairs = {(c.method, c.ablation) for c in TRAINABLE}
+    assert len(COLUMNS) == 8 and len(pairs) == len(TRAINABLE) == 9
     assert {a for _, a in pairs} - {None} == set(ABLATIONS)
+    stack = column_for("tosvi", "no-frame-stack")  # the §S3 analysis's network
+    assert (stack.arch, stack.frame_stack, stack.adm, stack.synthesized) == (
+        "tosvi",
+        1,
+        False,
+        False,
+    )
+    assert all(c.frame_stack is None for c in COLUMNS)
+    with pytest.raises(UsageError, match="ablation of tosvi"):
+        column_for("awda", "no-frame-stack")
     full = column_for("awda", None)
     assert (full.name, full.num_heads, full.adm, full.synthesized) == ("Full-1", 2, True, True)
     assert column_for("awda", "no-waypoints").arch == "tosvi"
@@ -157,7 +167,7 @@ def _train(*args: str) -> int:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("column", COLUMNS, ids=[c.slug for c in COLUMNS])
+@pytest.mark.parametrize("column", TRAINABLE, ids=[c.slug for c in TRAINABLE])
 def test_every_column_trains_20_steps_into_loadable_snapshots(
     column, tiny: Path, recipe: Path, tmp_path: Path
 ) -> None:
@@ -197,6 +207,7 @@ def test_every_column_trains_20_steps_into_loadable_snapshots(
 
         model = snap.build_model()
         assert isinstance(model, TosviNet) and model.arch == column.arch
+        assert model.config.frame_stack == (column.frame_stack or 3)  # the tiny recipe's: 3
     data.close()
 
 

@@ -10,6 +10,7 @@ from awda_bench.reproduce import (
     COLUMN_KEYS,
     DEFAULT_COLUMNS,
     DEFAULT_GRASP_SELECT,
+    EVAL_VARIANTS,
     SUITES,
     ReproduceConfig,
     format_plan,
@@ -39,7 +40,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help=f"comma-separated Table S3 columns among {', '.join(COLUMN_KEYS)} "
         f"(default {','.join(DEFAULT_COLUMNS)}; full-1 alone with a frozen-backbone recipe such "
         "as small: T-OSVI caches every agent frame and its steps cost seconds there, so name "
-        "tosvi to add it)",
+        "tosvi to add it); the supplementary's §S3 analysis adds tosvi-no-frame-stack (trained) "
+        f"and {', '.join(EVAL_VARIANTS)} (tosvi's snapshots with the mean / mode action; they "
+        "need tosvi in the list)",
     )
     parser.add_argument(
         "--hold-out", default=None, metavar="FAMILY", help="MOSAIC: the held-out family"

@@ -8,14 +8,14 @@ from pathlib import Path
 
 from awda_bench.errors import UnknownChoiceError
 from awda_bench.models.config import DEVICE_CHOICES
-from awda_bench.training.columns import ABLATIONS, COLUMNS, METHODS
+from awda_bench.training.columns import ABLATIONS, METHODS, TRAINABLE
 from awda_bench.training.recipe import available_recipes
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     columns = "; ".join(
         f"{c.name} = --method {c.method}" + (f" --ablation {c.ablation}" if c.ablation else "")
-        for c in COLUMNS
+        for c in TRAINABLE
     )
     parser = subparsers.add_parser(
         "train",
@@ -27,7 +27,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     parser.add_argument("--method", required=True, help=f"one of {', '.join(METHODS)}")
     parser.add_argument(
-        "--ablation", default=None, help=f"an ablation of awda: one of {', '.join(ABLATIONS)}"
+        "--ablation",
+        default=None,
+        help=f"an ablation of awda (or no-frame-stack, of tosvi): one of {', '.join(ABLATIONS)}",
     )
     parser.add_argument("--data", type=Path, required=True, help="DATA_DIR (a train collection)")
     parser.add_argument("--out", type=Path, required=True, help="CKPT_DIR (snapshots and logs)")

@@ -344,8 +344,8 @@ class TosviDataset:
         allow_test: bool = False,
     ) -> None:
         _check_split(data, allow_test)
-        if frame_stack < 2:
-            raise UsageError(f"frame_stack must be >= 2, got {frame_stack}")
+        if frame_stack < 1:
+            raise UsageError(f"frame_stack must be >= 1, got {frame_stack}")
         self.data = data
         self.demo_frames = demo_frames
         self.frame_stack = frame_stack

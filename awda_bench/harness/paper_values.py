@@ -75,5 +75,32 @@ PAPER_S4_MOSAIC: dict[str, str] = {"drawer": "0.15 ± 0.038"}
 """Table S4, MOSAIC [3] row (another method's numbers; SE estimated by the AWDA authors from
 MOSAIC's standard deviation over its last 3 snapshots): family -> the printed cell."""
 
+S3_ANALYSIS_COLUMNS: tuple[tuple[str, str], ...] = (
+    ("tosvi-mean", "T-OSVI [1], mean action"),
+    ("tosvi-mode", "T-OSVI [1], mode action"),
+    ("tosvi-no-frame-stack", "T-OSVI [1], no frame-stack"),
+)
+"""The supplementary's §S3 analysis's variants of T-OSVI as ``(key, title)``; the keys are
+``reproduce --columns`` names (and the method labels it stores)."""
+
+PAPER_S3_ANALYSIS: dict[str, dict[str, str]] = {
+    "tosvi-mean": {"reached": "0.11"},
+    "tosvi-mode": {"reached": "0.10"},
+    "tosvi-no-frame-stack": {"reached": "0.12", "success": "0.01"},
+}
+"""The supplementary's §S3 analysis ("DAgger problem continued", pick-and-place, its text, not a
+table): T-OSVI evaluated with the mean and the mode action, and trained without a frame-stack;
+column key -> rate -> the value as written. It judges them by *reaching* (the failure it studies is
+reaching the wrong object) and gives a success only for the no-frame-stack model (0.01, against
+the baseline's 0.1); the baseline's own reaching rate is not in the supplementary."""
+
+
+def paper_analysis_text(key: str) -> str | None:
+    """``reached 0.11`` / ``reached 0.12, success 0.01``: a §S3 analysis cell of the paper, or
+    ``None`` for a key it has none for."""
+    rates = PAPER_S3_ANALYSIS.get(key)
+    return None if rates is None else ", ".join(f"{k} {v}" for k, v in rates.items())
+
+
 S4_NOT_LEGIBLE = "not legible in the extracted Table S4"
 """What a page prints for a Table S4 cell missing from :data:`PAPER_S4` / :data:`PAPER_S4_MOSAIC`."""

@@ -25,7 +25,7 @@ from pathlib import Path
 
 from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
 from awda_bench.harness.aggregate import S4_FAMILIES
-from awda_bench.harness.paper_values import NO_COUNTERPART, S3_COLUMNS
+from awda_bench.harness.paper_values import NO_COUNTERPART, S3_ANALYSIS_COLUMNS, S3_COLUMNS
 
 INDEX_NAME = "results_sources.toml"
 """The index's file name (in ``reports/``)."""
@@ -38,6 +38,9 @@ REFERENCE_KEYS: tuple[str, ...] = ("scripted", "gt-waypoints", "gt-waypoints-cen
 
 LEARNED_KEYS: tuple[str, ...] = tuple(k for k, _ in S3_COLUMNS if k not in NO_COUNTERPART)
 """Column keys of Table S3 this project can train."""
+
+ANALYSIS_KEYS: tuple[str, ...] = tuple(k for k, _ in S3_ANALYSIS_COLUMNS)
+"""Column keys of the supplementary's §S3 analysis (T-OSVI variants; pick-and-place only)."""
 
 FAMILY_KEYS: tuple[str, ...] = tuple(k for k, _ in S4_FAMILIES)
 """MOSAIC families an entry may name (Table S4's columns)."""
@@ -74,8 +77,14 @@ def _entry(index: Path, suite: str, family: str | None, column: str, value: obje
     where = f"{index} [{suite if family is None else f'{suite}.{family}'}] {column}"
     if column in NO_COUNTERPART:
         raise UsageError(f"{where}: {NO_COUNTERPART[column]}; delete the entry")
-    if column not in LEARNED_KEYS + REFERENCE_KEYS:
-        raise UnknownChoiceError(f"column in {where}", column, LEARNED_KEYS + REFERENCE_KEYS)
+    known = LEARNED_KEYS + REFERENCE_KEYS + ANALYSIS_KEYS
+    if column not in known:
+        raise UnknownChoiceError(f"column in {where}", column, known)
+    if column in ANALYSIS_KEYS and suite != "pick_place":
+        raise UsageError(
+            f"{where}: the §S3 analysis ({column}) is a pick-and-place analysis; move the entry "
+            "to [pick_place]"
+        )
     if not isinstance(value, dict) or not isinstance(value.get("source"), str):
         raise UsageError(
             f'{where}: write it as {column} = {{ source = "DIR" }} (DIR relative to {index.parent})'

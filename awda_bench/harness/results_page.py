@@ -32,13 +32,16 @@ from awda_bench.harness.methods import get_method
 from awda_bench.harness.paper_values import (
     NO_COUNTERPART,
     PAPER_S3,
+    PAPER_S3_ANALYSIS,
     PAPER_S4,
     PAPER_S4_MOSAIC,
+    S3_ANALYSIS_COLUMNS,
     S3_COLUMNS,
     S3_ROWS,
     S4_NOT_LEGIBLE,
 )
 from awda_bench.harness.results_index import (
+    ANALYSIS_KEYS,
     INDEX_NAME,
     LEARNED_KEYS,
     REFERENCE_KEYS,
@@ -335,6 +338,8 @@ class ResultsPage:
     """Success metric of every cell."""
     s3_pick_place: pd.DataFrame
     s3_metaworld: pd.DataFrame
+    s3_analysis: pd.DataFrame
+    """The supplementary's §S3 analysis: T-OSVI with the mean / mode action, without a stack."""
     s4: pd.DataFrame
     reference: pd.DataFrame
     failures: pd.DataFrame
@@ -375,6 +380,17 @@ class ResultsPage:
             "### Meta-World",
             "",
             tables.to_markdown(self.s3_metaworld),
+            "### §S3 analysis: T-OSVI's action selection and frame-stack (pick-and-place)",
+            "",
+            'The supplementary (§S3, "DAgger problem continued") evaluates the T-OSVI baseline '
+            "with the mixture's mean and its mode action instead of a sample, and trains one "
+            "without a frame-stack, judging them by *reaching* (the failure it studies: the "
+            "policy reaches the wrong object). Its values are in its text, not a table; the "
+            "baseline's own reaching rate is not given. Ours: reached and grasped are the rates "
+            "of `grasp.csv` (all of the label's episodes), success is the cell's mean ± SE over "
+            "snapshots.",
+            "",
+            tables.to_markdown(self.s3_analysis),
             "## Table S4: MOSAIC, success on each held-out family",
             "",
             "All = the mean over the six families, where all six exist for the column (SE = "
@@ -493,7 +509,8 @@ class _Builder:
         """Our cell, or the reason it is not run."""
         entry = self.find(suite, column, None if group == ALL else group)
         if entry is None:
-            return NO_COUNTERPART.get(column, NOT_TRAINED if column in LEARNED_KEYS else "")
+            trainable = column in LEARNED_KEYS + ANALYSIS_KEYS
+            return NO_COUNTERPART.get(column, NOT_TRAINED if trainable else "")
         report = self.report(entry)
         if (suite, group, entry.label) not in report.cells:
             return f"{entry.source} has no {group} episodes of {entry.label!r}"
@@ -545,6 +562,46 @@ class _Builder:
         index = pd.Index([f"{title} (`{key}`)" for key, title in S3_COLUMNS], name="column")
         return pd.DataFrame(rows, index=index)
 
+    def s3_analysis(self) -> pd.DataFrame:
+        rows, index = [], []
+        for key, title in (("tosvi", dict(S3_COLUMNS)["tosvi"]), *S3_ANALYSIS_COLUMNS):
+            cell = self.cell("pick_place", key, ALL)
+            paper = PAPER_S3_ANALYSIS.get(key, {})
+            row = {
+                "reached": "–",
+                "grasped": "–",
+                OURS: NOT_RUN,
+                f"{PAPER}: reached": paper.get("reached", "not given"),
+                f"{PAPER}: success": paper.get(
+                    "success", PAPER_S3["pick_place"][key] if key == "tosvi" else "not given"
+                ),
+                SOURCE: "–",
+                NOTE: cell if isinstance(cell, str) else _notes(cell),
+            }
+            entry = self.find("pick_place", key, None)
+            if isinstance(cell, PageCell) and entry is not None:
+                rates = self.rates(entry)
+                if rates is not None:
+                    row["reached"], row["grasped"] = (f"{r:.2f}" for r in rates[:2])
+                row[OURS] = cell.ours()
+                row[SOURCE] = _sources(cell)
+            rows.append(row)
+            index.append(f"{title} (`{key}`)")
+        columns = [
+            "reached", "grasped", OURS, f"{PAPER}: reached", f"{PAPER}: success", SOURCE, NOTE,
+        ]  # fmt: skip
+        return pd.DataFrame(rows, index=pd.Index(index, name="column"), columns=columns)
+
+    def rates(self, entry: SourceEntry) -> tuple[float, float, float, int] | None:
+        """``(reached, grasped, success, episodes)`` of the entry's label from its grasp.csv, or
+        ``None`` where its tasks report no grasp flags."""
+        g = self.report(entry).grasp
+        match = g[(g["suite"] == entry.suite) & (g["method"] == entry.label)]
+        if match.empty or pd.isna(match.iloc[0]["reached"]):
+            return None
+        r = match.iloc[0]
+        return float(r["reached"]), float(r["grasped"]), float(r["success"]), int(r["episodes"])
+
     def s4(self) -> pd.DataFrame:
         keys = ["full-1"] + [
             k
@@ -586,24 +643,16 @@ class _Builder:
         return pd.DataFrame(rows, index=pd.Index(index, name="suite"), columns=columns)
 
     def failures(self) -> tuple[pd.DataFrame, list[str]]:
-        titles = dict(S3_COLUMNS)
+        titles = dict(S3_COLUMNS) | dict(S3_ANALYSIS_COLUMNS)
         rows, index, no_grasp = [], [], []
         for entry in self.entries:
-            report = self.report(entry)
-            g = report.grasp
-            match = g[(g["suite"] == entry.suite) & (g["method"] == entry.label)]
             scope = f" ({entry.family})" if entry.family else ""
             name = f"{titles.get(entry.column, entry.column)}{scope}"
-            if match.empty or pd.isna(match.iloc[0]["reached"]):
+            rates = self.rates(entry)
+            if rates is None:
                 no_grasp.append(f"{SUITE_TITLES[entry.suite]} {name}")
                 continue
-            r = match.iloc[0]
-            n = int(r["episodes"])
-            reached, grasped, success = (
-                float(r["reached"]),
-                float(r["grasped"]),
-                float(r["success"]),
-            )
+            reached, grasped, success, n = rates
             n_reached = _count(reached, n)
             row = {
                 "cell": name,
@@ -662,6 +711,7 @@ def build_results_page(index: Path) -> ResultsPage:
         metric=builder.metric,
         s3_pick_place=builder.s3_pick_place(),
         s3_metaworld=builder.s3_metaworld(),
+        s3_analysis=builder.s3_analysis(),
         s4=builder.s4(),
         reference=builder.reference(),
         failures=failures,

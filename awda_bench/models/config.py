@@ -240,7 +240,8 @@ class TosviConfig:
     trunk: TrunkConfig = field(default_factory=TrunkConfig)
     """Shared visual trunk."""
     frame_stack: int = 6
-    """Agent frames o_{t-5..t} placed after the demo frames (T-OSVI: 6)."""
+    """Agent frames o_{t-5..t} placed after the demo frames (T-OSVI: 6; 1 is the §S3 analysis's
+    no-frame-stack model, which has no consecutive pairs and so no inverse-model loss)."""
     action_dim: int = 4
     """dx, dy, dz, grip, each in [-1, 1]."""
     mixture_components: int = 3
@@ -270,7 +271,7 @@ class TosviConfig:
 
     def __post_init__(self) -> None:
         o = "TosviConfig"
-        _check(self.frame_stack >= 2, o, "frame_stack", self.frame_stack, "an int >= 2")
+        _check(self.frame_stack >= 1, o, "frame_stack", self.frame_stack, "an int >= 1")
         _check(self.action_dim >= 1, o, "action_dim", self.action_dim, "an int >= 1")
         _check(self.feature_pool >= 1, o, "feature_pool", self.feature_pool, "an int >= 1")
         _check(

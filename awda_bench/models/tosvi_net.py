@@ -229,7 +229,8 @@ class TosviNet(nn.Module):
         b, s = vectors.shape[:2]
         policy = self.policy_head(vectors[:, -1]).view(b, cfg.action_dim, -1)
         pairs = torch.cat((vectors[:, :-1], vectors[:, 1:]), dim=-1)
-        inverse = self.inverse_head(pairs).view(b, s - 1, cfg.action_dim, -1)
+        params = 3 * cfg.mixture_components  # explicit: a stack of 1 has no pairs
+        inverse = self.inverse_head(pairs).view(b, s - 1, cfg.action_dim, params)
         return policy, inverse
 
     def policy_from_frames(self, frames: torch.Tensor) -> torch.Tensor:
@@ -249,7 +250,8 @@ class TosviNet(nn.Module):
     def compute_loss(
         self, batch: Mapping[str, torch.Tensor]
     ) -> tuple[torch.Tensor, dict[str, float]]:
-        """Policy NLL of a_t + ``inverse_loss_weight`` x inverse-model NLL of a_{t-5..t-1}.
+        """Policy NLL of a_t + ``inverse_loss_weight`` x inverse-model NLL of a_{t-5..t-1}
+        (0 with ``frame_stack = 1``: no pairs).
 
         NLLs are summed over action dimensions and averaged over samples (and pairs) [nats].
         """
@@ -261,7 +263,10 @@ class TosviNet(nn.Module):
             policy, inverse = self(batch["demo"], batch["frames"], batch.get("depth"))
         actions = batch["actions"]
         policy_nll = -self.distribution(policy).log_prob(actions[:, -1]).sum(-1).mean()
-        inverse_nll = -self.distribution(inverse).log_prob(actions[:, :-1]).sum(-1).mean()
+        if inverse.shape[1] == 0:  # frame_stack 1: no consecutive pairs, no inverse model
+            inverse_nll = policy_nll.new_zeros(())
+        else:
+            inverse_nll = -self.distribution(inverse).log_prob(actions[:, :-1]).sum(-1).mean()
         loss = policy_nll + self.config.inverse_loss_weight * inverse_nll
         return loss, {
             "loss": float(loss.detach()),

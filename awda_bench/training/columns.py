@@ -13,6 +13,18 @@ T-OSVI                tosvi           (none)            no     no    TosviNet
 T-OSVI +depth         tosvi-depth     (none)            no     no    TosviNet + depth ResNet
 ====================  ==============  ================  =====  ====  =========================
 
+Beside Table S3, the supplementary's §S3 analysis trains one more network (:data:`ANALYSIS_COLUMNS`):
+
+=======================  ========  ================  =====  ====  ===========================
+column                   method    ``--ablation``    ADM    TS    network
+=======================  ========  ================  =====  ====  ===========================
+T-OSVI, no frame-stack   tosvi     no-frame-stack    no     no    TosviNet, ``frame_stack = 1``
+=======================  ========  ================  =====  ====  ===========================
+
+With one frame there are no consecutive pairs, so this network has no inverse-model loss (the
+supplementary does not say what its no-frame-stack model did with T-OSVI's inverse model; a stack of
+one cannot feed it).
+
 ADM = Asymmetric Demonstration Mixup; TS = trajectory-synthesis episodes in the training set
 (AWDA: routed to head 1 when there are two heads; T-OSVI-style nets: plain extra samples).
 Without TS data a second head would never receive a sample, so ``no-ad`` and ``only-waypoints``
@@ -36,8 +48,9 @@ ABLATIONS: tuple[str, ...] = (
     "no-adm",
     "no-waypoints",
     "only-waypoints",
+    "no-frame-stack",
 )
-"""``--ablation`` values (each an ablation of ``awda``)."""
+"""``--ablation`` values (the first five ablate ``awda``; ``no-frame-stack`` ablates ``tosvi``)."""
 
 
 @dataclass(frozen=True)
@@ -58,6 +71,9 @@ class Column:
     """Asymmetric Demonstration Mixup on training batches."""
     synthesized: bool
     """Trajectory-synthesis episodes are training samples."""
+    frame_stack: int | None = None
+    """T-OSVI-style nets: agent frames per sample, overriding the recipe's ``frame_stack``
+    (``None``: the recipe's)."""
 
     @property
     def slug(self) -> str:
@@ -77,6 +93,17 @@ COLUMNS: tuple[Column, ...] = (
 )
 """Every trainable column of Table S3, in the table's order (module docstring)."""
 
+ANALYSIS_COLUMNS: tuple[Column, ...] = (
+    Column(
+        "T-OSVI, no frame-stack", "tosvi", "no-frame-stack", "tosvi", 1,
+        adm=False, synthesized=False, frame_stack=1,
+    ),
+)  # fmt: skip
+"""Networks the supplementary's §S3 analysis trains beside Table S3 (module docstring)."""
+
+TRAINABLE: tuple[Column, ...] = COLUMNS + ANALYSIS_COLUMNS
+"""Every column ``train`` accepts."""
+
 
 def column_for(method: str, ablation: str | None) -> Column:
     """The column ``(method, ablation)`` trains; unknown names and pairs are refused."""
@@ -84,10 +111,11 @@ def column_for(method: str, ablation: str | None) -> Column:
         raise UnknownChoiceError("method", method, METHODS)
     if ablation is not None and ablation not in ABLATIONS:
         raise UnknownChoiceError("ablation", ablation, ABLATIONS)
-    for column in COLUMNS:
+    for column in TRAINABLE:
         if column.method == method and column.ablation == ablation:
             return column
+    owner = next(c.method for c in TRAINABLE if c.ablation == ablation)
     raise UsageError(
-        f"--ablation {ablation} is an ablation of awda, not of {method}; "
-        f"use --method awda --ablation {ablation}, or {method} without --ablation"
+        f"--ablation {ablation} is an ablation of {owner}, not of {method}; "
+        f"use --method {owner} --ablation {ablation}, or {method} without --ablation"
     )

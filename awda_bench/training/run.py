@@ -274,6 +274,12 @@ def trunk_config(recipe: Recipe) -> TrunkConfig:
     )
 
 
+def frame_stack_of(recipe: Recipe, column: Column) -> int:
+    """Agent frames per T-OSVI sample: the column's override (``no-frame-stack``: 1) or the
+    recipe's ``frame_stack``."""
+    return column.frame_stack if column.frame_stack is not None else recipe.model.frame_stack
+
+
 def model_config(
     recipe: Recipe, column: Column, camera: dict[str, Any] | None = None
 ) -> AwdaConfig | TosviConfig:
@@ -295,7 +301,7 @@ def model_config(
         )
     return TosviConfig(
         trunk=replace(trunk, head="self-attention"),  # T-OSVI reads every frame's keypoints
-        frame_stack=m.frame_stack,
+        frame_stack=frame_stack_of(recipe, column),
         mixture_components=m.mixture_components,
         feature_pool=m.tosvi_feature_pool,
         use_depth=column.arch == "tosvi-depth",
@@ -328,7 +334,7 @@ def make_dataset(
     return TosviDataset(
         data,
         demo_frames=m.demo_frames,
-        frame_stack=m.frame_stack,
+        frame_stack=frame_stack_of(recipe, column),
         image_size=size,
         depth_size=(m.depth_height_px, m.depth_width_px),
         with_depth=column.arch == "tosvi-depth",
