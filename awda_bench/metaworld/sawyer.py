@@ -118,14 +118,33 @@ SAWYER_EXECUTOR = ExecutorConfig(
         descend_step_budget=60,
         close_steps=15,
         lift_step_budget=40,
+        lift_blocked_steps=4,
         lift_min_command_m=0.2 * STEP_M,
     ),
     drop=DropConfig(open_steps=15, settle_steps=8, settled_m=0.001),
     press=PressConfig(max_step_m=STEP_M, min_command_m=0.2 * STEP_M, step_budget=120),
+    push_closed=False,
 )
 """The executor on the Sawyer at 80 Hz: 1 cm steps, so budgets twice the Panda's (120 steps: 1.2 m);
 the fingers close from open to a grip in ~12 steps and open in ~10 (the experts' rollouts), hence
-15-step close and open holds; the grasp descends to 2.5 cm below the seen top (the
-pick-place-wall expert closes with the TCP 1.2-1.6 cm above the table on a puck whose top the
-wrist camera sees at 4 cm), at least 1 cm above the floor; motions count as reached within 1 cm
-(Meta-World's success radii are 2-7 cm from a goal the expert only just enters)."""
+15-step close and open holds.
+
+Grasp: the descent goes 3.5 cm below the seen top, never lower than 1 cm above the floor: on
+pick-place-wall's puck (top seen at 4 cm) the floor bound holds (the expert closes with the TCP
+1.2-1.6 cm above the table), on sweep-into's cube (top 9 cm, on a platform at 5 cm) the fingers
+close 0.5 cm under the cube's centre (2.5 cm: no difference measured, 6 seeds of each). ``lift_blocked_steps = 4``
+(the descent and lift end when blocked for this many steps): from standstill the hand realizes
+0.11 of a full-speed command on the first step and 0.27 on the second, and a descent that
+starts while the hover's upward motion is still dying out read as blocked twice and closed the
+fingers in the air (sweep-into, seed 5005).
+
+Motions count as reached within 2 mm (the tracking target brings the TCP within 1 mm; at 5 mm
+and 1 cm the last push of button-press stopped short of the button's travel: Meta-World's
+success regions begin just where the expert's last waypoint lies).
+
+``push_closed = False``: an episode without a grasp moves with the hand open. Closing the Sawyer's
+fingers moves its TCP (the finger sites' midpoint) 5.2 mm along +y relative to the hand, so a
+closed hand steered to waypoints recorded with it open stops 5 mm short of them: button-press
+(whose expert pushes with the hand open) 11/20 with the hand closed (the first waypoint, at the
+workspace's y bound, also became unreachable), 8/8 open (seeds 5000-5007; 5/5 on seeds that had
+failed closed); window-open and door-unlock (their experts push closed) 8/8 open as well."""
