@@ -4,7 +4,7 @@ localizer, and its actions.
 
 ::
 
-    plan:     S = save_state(task env)                      the real start (awda_bench.metaworld.state)
+    plan:     S = save_state(task env)                      the real start (.state)
               the package's scripted policy from S, to its first success (or planning_steps),
               recording TCP, finger distance, actions       -> Trajectory
               restore_state(task env, S)                    bit-identical to S

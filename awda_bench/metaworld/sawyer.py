@@ -129,12 +129,12 @@ SAWYER_EXECUTOR = ExecutorConfig(
 the fingers close from open to a grip in ~12 steps and open in ~10 (the experts' rollouts), hence
 15-step close and open holds.
 
-Grasp: the descent goes 3.5 cm below the seen top, never lower than 1 cm above the floor: on
-pick-place-wall's puck (top seen at 4 cm) the floor bound holds (the expert closes with the TCP
-1.2-1.6 cm above the table), on sweep-into's cube (top 9 cm, on a platform at 5 cm) the fingers
-close 0.5 cm under the cube's centre (2.5 cm: no difference measured, 6 seeds of each). ``lift_blocked_steps = 4``
-(the descent and lift end when blocked for this many steps): from standstill the hand realizes
-0.11 of a full-speed command on the first step and 0.27 on the second, and a descent that
+Grasp: the descent goes 3.5 cm below the seen top, never lower than 1 cm above the floor: on pick-
+place-wall's puck (top seen at 4 cm) the floor bound holds (the expert closes with the TCP 1.2-1.6
+cm above the table), on sweep-into's cube (top 9 cm, on a platform at 5 cm) the fingers close 0.5
+cm under the cube's centre (2.5 cm: no difference measured, 6 seeds of each). ``lift_blocked_steps
+= 4`` (the descent and lift end when blocked for this many steps): from standstill the hand
+realizes 0.11 of a full-speed command on the first step and 0.27 on the second, and a descent that
 starts while the hover's upward motion is still dying out read as blocked twice and closed the
 fingers in the air (sweep-into, seed 5005).
 

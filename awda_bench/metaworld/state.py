@@ -18,10 +18,10 @@ Arrays that are views into MuJoCo's memory stay as they are: they follow the res
 the puck's position twice; a frozen copy restored in its place changed the reward from the tenth
 restored step.)
 Objects (the model, the renderer, gymnasium spaces, random generators) are not copied: steps do
-not change them. After the restore, ``mj_forward`` recomputes every derived quantity (then the saved state
-is set once more: the forward pass overwrote the solver's warm start) and the goal markers are
-put back (rendering only, as :func:`~awda_bench.metaworld.layout.reset_to_layout`).
-A restored rollout is bit-identical to the original (tested on the held-out tasks).
+not change them. After the restore, ``mj_forward`` recomputes every derived quantity (then the
+saved state is set once more: the forward pass overwrote the solver's warm start) and the goal
+markers are put back (rendering only, as :func:`~awda_bench.metaworld.layout.reset_to_layout`). A
+restored rollout is bit-identical to the original (tested on the held-out tasks).
 """
 
 from __future__ import annotations
