@@ -102,10 +102,11 @@ and delta = -0.05 in Meta-World's normalized finger distance (``obs[3]`` = dista
 and door-unlock experts, which push with the hand closed), which the reference formula reads as
 a grasp; holding the pick-place-wall puck they are 45 mm apart, the sweep-into cube 39-71 mm."""
 
-SAWYER_LOCALIZATION = replace(WRIST_LOCALIZATION, min_depth_m=0.0)
-"""Wrist-depth localization on ``gripperPOV`` (128 x 128): the ManiSkill wrist camera's settings;
-``gripperPOV`` sees none of the hand (its nearest returns are the table and objects), so no
-near mask."""
+SAWYER_LOCALIZATION = replace(WRIST_LOCALIZATION, min_depth_m=0.12)
+"""Wrist-depth localization on ``gripperPOV`` (128 x 128): the ManiSkill wrist camera's settings,
+with the hand masked by depth: the Sawyer's hand and fingers fill the image's depths from 2.5 to
+11 cm (reach-v3, an empty table, hand open and closed; the camera sits 10 cm above the TCP), an
+object at the grasp's hover point is at least 25 cm away."""
 
 SAWYER_EXECUTOR = ExecutorConfig(
     motion=FreeSpaceConfig(
