@@ -110,8 +110,7 @@ class MetaWorldScene:
         self.env = ctx.env
         self._offset = mocap_offset(self.env.task_env)
 
-    @staticmethod
-    def configure(config: Any) -> Any:
+    def configure(self, config: Any) -> Any:
         """``config`` (a ``GTWaypointsConfig``) with the Sawyer's executor, mining and
         localization parameters (:mod:`awda_bench.metaworld.sawyer`) in place of the Panda's;
         the method's own choices (K, the planning budget, the grasp's component rule) kept.

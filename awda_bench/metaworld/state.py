@@ -21,7 +21,8 @@ Objects (the model, the renderer, gymnasium spaces, random generators) are not c
 not change them. After the restore, ``mj_forward`` recomputes every derived quantity (then the
 saved state is set once more: the forward pass overwrote the solver's warm start) and the goal
 markers are put back (rendering only, as :func:`~awda_bench.metaworld.layout.reset_to_layout`). A
-restored rollout is bit-identical to the original (tested on the held-out tasks).
+restored rollout is bit-identical to the original (checked on the five held-out tasks after 7
+random steps; ``tests/test_metaworld_gt_waypoints.py`` keeps sweep-into and pick-place-wall).
 """
 
 from __future__ import annotations

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -163,6 +163,25 @@ class EpisodeStats:
         return 1e3 * (self.act_s - self.capture_s) / self.act_calls
 
 
+class Scene(Protocol):
+    """What ``gt-waypoints`` asks of the simulator in one episode."""
+
+    def configure(self, config: GTWaypointsConfig) -> GTWaypointsConfig:
+        """The settings the episode runs with (the robot's own parameters put in)."""
+
+    def plan(self, max_steps: int) -> list[Trajectory]:
+        """Expert rollout(s) from the current state, which is restored afterwards."""
+
+    def robot_states(self) -> list[RobotState]:
+        """Per env, the primitives' view of the robot now."""
+
+    def locator(self, env_index: int, config: LocalizationConfig) -> WristLocator:
+        """The grasp primitive's wrist-depth localizer of env ``env_index``."""
+
+    def env_actions(self, actions: np.ndarray) -> np.ndarray:
+        """The primitives' ``(n, 4)`` commands as the env's actions."""
+
+
 class ManiSkillScene:
     """``gt-waypoints``' view of one ManiSkill episode: the suite's expert plans on a copy of the
     scene state (``get_state_dict``/``set_state_dict``), the ``panda_awda`` wrist camera
@@ -210,7 +229,7 @@ class ManiSkillScene:
         return actions
 
 
-def scene_for(ctx: EpisodeContext) -> Any:
+def scene_for(ctx: EpisodeContext) -> Scene:
     """The simulator's scene of ``ctx`` (Meta-World's imported only there: it needs
     ``.venv-metaworld``)."""
     if getattr(ctx.env, "simulator", None) == "metaworld":
@@ -234,7 +253,7 @@ class GTWaypointsPolicy:
         self.episode_config = self.config
         """The settings the current episode runs with."""
         self._env: Any = None
-        self._scene: Any = None
+        self._scene: Scene | None = None
         self._executors: list[WaypointExecutor] = []
         self._locators: list[WristLocator] = []
         self._waypoints: np.ndarray | None = None
@@ -243,9 +262,10 @@ class GTWaypointsPolicy:
     # ------------------------------------------------------------------ planning
     def plan(self, ctx: EpisodeContext) -> list[Trajectory]:
         """Expert rollout(s) from the current scene, which is restored afterwards."""
-        self._scene = scene_for(ctx)
-        self.episode_config = self._scene.configure(self.config)
-        return self._scene.plan(self.episode_config.planning_steps)
+        scene = scene_for(ctx)
+        self._scene = scene
+        self.episode_config = scene.configure(self.config)
+        return scene.plan(self.episode_config.planning_steps)
 
     def reset(self, ctx: EpisodeContext) -> None:
         self.stats = EpisodeStats()
@@ -268,6 +288,7 @@ class GTWaypointsPolicy:
                 config.num_waypoints,
                 config.executor.grasp.lift_m,
             )
+            assert self._scene is not None  # set by plan()
             locator = self._scene.locator(i, config.localization)
             self._locators.append(locator)
             self._executors.append(WaypointExecutor(W, locator, config.executor))
@@ -276,7 +297,7 @@ class GTWaypointsPolicy:
 
     # ------------------------------------------------------------------ acting
     def act(self, obs: Any) -> np.ndarray:
-        if self._env is None:
+        if self._env is None or self._scene is None:
             raise RuntimeError("GTWaypointsPolicy.act() before reset(ctx)")
         t0 = time.perf_counter()
         states = self._scene.robot_states()
