@@ -140,9 +140,12 @@ def test_the_mined_grasp_starts_on_the_object_and_pushing_closed_is_not_a_grasp(
 
 @pytest.mark.slow
 @needs_metaworld
-def test_gt_waypoints_picks_and_places_over_the_wall_through_the_harness(tmp_path: Path) -> None:
+def test_gt_waypoints_picks_over_the_wall_and_presses_the_button_through_the_harness(
+    tmp_path: Path,
+) -> None:
     suite = load_suite("metaworld")
-    task = next(t for t in suite.held_out if suite.task(t).name == "pick-place-wall-v3")
+    index = {suite.task(t).name: t for t in suite.held_out}
+    pick, button = index["pick-place-wall-v3"], index["button-press-v3"]
     result = run_sweep(
         SweepConfig(
             suite="metaworld",
@@ -150,15 +153,18 @@ def test_gt_waypoints_picks_and_places_over_the_wall_through_the_harness(tmp_pat
             out=tmp_path,
             episodes=2,
             workers=1,
-            tasks=(task,),
+            tasks=(pick, button),
             progress=False,
         )
     )
-    assert result.errors == 0 and result.successes == 2
+    assert result.errors == 0 and result.successes == 4
     with ResultsStore(tmp_path, create=False) as store:
-        rows = store.raw("SELECT waypoints, steps FROM episodes")
-    for waypoints, steps in rows:
+        rows = store.raw("SELECT task, waypoints, steps FROM episodes")
+    for task, waypoints, steps in rows:
         W = np.asarray(json.loads(waypoints))
         assert W.shape == (5, 4)  # K = 5, positions + the grasp attribute (no pressing one)
-        assert W[:, 3].tolist() == [0.0, 1.0, 1.0, 1.0, 1.0]  # approach, grasp, carried
+        if task == pick:
+            assert W[:, 3].tolist() == [0.0, 1.0, 1.0, 1.0, 1.0]  # approach, grasp, carried
+        else:
+            assert not W[:, 3].any()  # a push: no grasp mined
         assert steps < suite.horizon_steps  # the executor finished the waypoints
