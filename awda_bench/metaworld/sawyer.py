@@ -23,10 +23,12 @@ more than the grasp's 4 mm descent tolerance; 10 cm along x is 19 mm short after
 G = 2: within 2 mm after 28 / 20 / 4 steps; G = 5: 13 / 23 / 3 steps, 0.9 mm left.
 
 A recorded expert rollout is put into the same action space by the inverse
-(:func:`tracking_command`), so the pressing miner compares the TCP's motion with the lead the
-expert's mocap had over it, not with its raw mocap increments (those keep commanding motion
-against the mocap's workspace box, and the hand's lag behind an accelerating mocap read as
-"blocked").
+(:func:`tracking_command`), as the ManiSkill trajectories are in their controller's: a step's
+command is then the lead the expert's mocap had over the TCP, not its raw mocap increment (which
+keeps commanding motion against the mocap's workspace box and reads the hand's lag behind an
+accelerating mocap as "blocked": on the raw increments the pressing miner, off on Meta-World,
+flagged the first 20 steps of a button-press plan, the hand's approach along the workspace's y
+bound).
 """
 
 from __future__ import annotations
