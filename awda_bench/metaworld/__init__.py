@@ -12,7 +12,10 @@ imports ``mujoco``.
 - :mod:`.env`: a suite's tasks behind the harness's env interface;
 - :mod:`.observations`: what an observation-only policy sees;
 - :mod:`.expert`: the package's scripted policies as the ``scripted`` method;
-- :mod:`.demo`: the demonstration video (the expert in the demo layout).
+- :mod:`.demo`: the demonstration video (the expert in the demo layout);
+- :mod:`.state`: save and restore a task env exactly;
+- :mod:`.sawyer`: the Sawyer as the motor primitives' robot (state, mocap driver, parameters);
+- :mod:`.gt_scene`: what ``gt-waypoints`` needs of an episode (the plan, the wrist localizer).
 """
 
 import os

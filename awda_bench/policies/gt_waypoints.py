@@ -12,16 +12,20 @@ Per episode::
 
 Rendered frames per episode: wrist depth images during grasps only (one per HOVER step of the
 grasp primitive), counted in :attr:`GTWaypointsPolicy.stats`.
+
+What is the simulator's is one small *scene* object per episode: :class:`ManiSkillScene` here,
+:class:`awda_bench.metaworld.gt_scene.MetaWorldScene` on Meta-World (the package's scripted
+policy plans, the Sawyer's parameters replace the Panda's, the primitives' commands become mocap
+actions). Mining, extraction and the executor are the same code on both.
 """
 
 from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
-import torch
 
 from awda_bench.episode import EpisodeContext, EpisodeSpec, Policy
 from awda_bench.mining import GraspMiningConfig, PressMiningConfig, mine_grasp, mine_press
@@ -45,8 +49,10 @@ class GTWaypointsConfig:
     """Primitive and execution parameters."""
     mining: GraspMiningConfig = GraspMiningConfig()
     """Grasp attribute mining."""
-    press_mining: PressMiningConfig = PressMiningConfig()
-    """Pressing attribute mining (the second attribute; the executor's press primitive acts on it)."""
+    press_mining: PressMiningConfig | None = PressMiningConfig()
+    """Pressing attribute mining (the second attribute; the executor's press primitive acts on
+    it); ``None``: the grasp attribute alone (Meta-World, see
+    :mod:`awda_bench.metaworld.gt_scene`)."""
     localization: LocalizationConfig = WRIST_LOCALIZATION
     """Wrist-depth localization in the grasp primitive."""
     record_truth: bool = False
@@ -61,7 +67,9 @@ class GTWaypointsConfig:
 
 
 def _numpy(x: Any) -> np.ndarray:
-    if isinstance(x, torch.Tensor):
+    """A NumPy copy of a torch tensor (ManiSkill's state) or an array; torch is not imported
+    here, so the policy also loads where there is none (the Meta-World workers)."""
+    if hasattr(x, "detach"):
         return x.detach().cpu().numpy()
     return np.asarray(x)
 
@@ -155,6 +163,82 @@ class EpisodeStats:
         return 1e3 * (self.act_s - self.capture_s) / self.act_calls
 
 
+class Scene(Protocol):
+    """What ``gt-waypoints`` asks of the simulator in one episode."""
+
+    def configure(self, config: GTWaypointsConfig) -> GTWaypointsConfig:
+        """The settings the episode runs with (the robot's own parameters put in)."""
+
+    def plan(self, max_steps: int) -> list[Trajectory]:
+        """Expert rollout(s) from the current state, which is restored afterwards."""
+
+    def robot_states(self) -> list[RobotState]:
+        """Per env, the primitives' view of the robot now."""
+
+    def locator(self, env_index: int, config: LocalizationConfig) -> WristLocator:
+        """The grasp primitive's wrist-depth localizer of env ``env_index``."""
+
+    def env_actions(self, actions: np.ndarray) -> np.ndarray:
+        """The primitives' ``(n, 4)`` commands as the env's actions."""
+
+
+class ManiSkillScene:
+    """``gt-waypoints``' view of one ManiSkill episode: the suite's expert plans on a copy of the
+    scene state (``get_state_dict``/``set_state_dict``), the ``panda_awda`` wrist camera
+    localizes, actions go to the env as they are."""
+
+    def __init__(self, ctx: EpisodeContext) -> None:
+        self.ctx = ctx
+        self.env = ctx.env
+        self._physics_only = True
+        self._record_truth = False
+
+    def configure(self, config: GTWaypointsConfig) -> GTWaypointsConfig:
+        self._physics_only = config.physics_only_planning
+        self._record_truth = config.record_truth
+        return config
+
+    def plan(self, max_steps: int) -> list[Trajectory]:
+        """Expert rollout(s) from the current scene, which is restored afterwards."""
+        from awda_bench.experts import make_expert
+
+        env = self.env
+        saved = env.get_state_dict()
+        elapsed = env._elapsed_steps.clone() if hasattr(env, "_elapsed_steps") else None
+        expert = make_expert(self.ctx.spec.suite, embodiment="agent")
+        expert.reset(self.ctx)
+        trajectories = record_rollouts(
+            env,
+            expert,
+            max_steps,
+            record_truth=self._record_truth,
+            physics_only=self._physics_only,
+        )
+        env.set_state_dict(saved)
+        if elapsed is not None:
+            env._elapsed_steps = elapsed
+        return trajectories
+
+    def robot_states(self) -> list[RobotState]:
+        return robot_states(self.env)
+
+    def locator(self, env_index: int, config: LocalizationConfig) -> WristLocator:
+        return WristLocator(self.env, env_index=env_index, config=config)
+
+    def env_actions(self, actions: np.ndarray) -> np.ndarray:
+        return actions
+
+
+def scene_for(ctx: EpisodeContext) -> Scene:
+    """The simulator's scene of ``ctx`` (Meta-World's imported only there: it needs
+    ``.venv-metaworld``)."""
+    if getattr(ctx.env, "simulator", None) == "metaworld":
+        from awda_bench.metaworld.gt_scene import MetaWorldScene
+
+        return MetaWorldScene(ctx)
+    return ManiSkillScene(ctx)
+
+
 class GTWaypointsPolicy:
     """Plans with the suite's scripted expert on the scene itself, then executes K waypoints."""
 
@@ -164,7 +248,12 @@ class GTWaypointsPolicy:
 
     def __init__(self, config: GTWaypointsConfig | None = None) -> None:
         self.config = config or GTWaypointsConfig()
+        """The method's settings (the Panda's parameters; on Meta-World the episode runs with
+        :attr:`episode_config`, the Sawyer's in their place)."""
+        self.episode_config = self.config
+        """The settings the current episode runs with."""
         self._env: Any = None
+        self._scene: Scene | None = None
         self._executors: list[WaypointExecutor] = []
         self._locators: list[WristLocator] = []
         self._waypoints: np.ndarray | None = None
@@ -173,24 +262,10 @@ class GTWaypointsPolicy:
     # ------------------------------------------------------------------ planning
     def plan(self, ctx: EpisodeContext) -> list[Trajectory]:
         """Expert rollout(s) from the current scene, which is restored afterwards."""
-        from awda_bench.experts import make_expert
-
-        env = ctx.env
-        saved = env.get_state_dict()
-        elapsed = env._elapsed_steps.clone() if hasattr(env, "_elapsed_steps") else None
-        expert = make_expert(ctx.spec.suite, embodiment="agent")
-        expert.reset(ctx)
-        trajectories = record_rollouts(
-            env,
-            expert,
-            self.config.planning_steps,
-            record_truth=self.config.record_truth,
-            physics_only=self.config.physics_only_planning,
-        )
-        env.set_state_dict(saved)
-        if elapsed is not None:
-            env._elapsed_steps = elapsed
-        return trajectories
+        scene = scene_for(ctx)
+        self._scene = scene
+        self.episode_config = scene.configure(self.config)
+        return scene.plan(self.episode_config.planning_steps)
 
     def reset(self, ctx: EpisodeContext) -> None:
         self.stats = EpisodeStats()
@@ -200,30 +275,34 @@ class GTWaypointsPolicy:
         self.stats.planning_s = time.perf_counter() - t0
         self.stats.planning_steps = sum(len(t) for t in trajectories)
         self.stats.trajectories = trajectories
+        config = self.episode_config
         self._executors, self._locators, waypoints = [], [], []
         for i, traj in enumerate(trajectories):
-            attributes = np.column_stack(
-                [mine_grasp(traj, self.config.mining), mine_press(traj, self.config.press_mining)]
-            )
+            columns = [mine_grasp(traj, config.mining)]
+            if config.press_mining is not None:
+                columns.append(mine_press(traj, config.press_mining))
+            attributes = np.column_stack(columns)
             W = extract_waypoints(
                 traj.tcp_pos,
                 attributes,
-                self.config.num_waypoints,
-                self.config.executor.grasp.lift_m,
+                config.num_waypoints,
+                config.executor.grasp.lift_m,
             )
-            locator = WristLocator(ctx.env, env_index=i, config=self.config.localization)
+            assert self._scene is not None  # set by plan()
+            locator = self._scene.locator(i, config.localization)
             self._locators.append(locator)
-            self._executors.append(WaypointExecutor(W, locator, self.config.executor))
+            self._executors.append(WaypointExecutor(W, locator, config.executor))
             waypoints.append(W)
         self._waypoints = waypoints[0]
 
     # ------------------------------------------------------------------ acting
     def act(self, obs: Any) -> np.ndarray:
-        if self._env is None:
+        if self._env is None or self._scene is None:
             raise RuntimeError("GTWaypointsPolicy.act() before reset(ctx)")
         t0 = time.perf_counter()
-        states = robot_states(self._env)
-        action = np.stack([ex.step(s) for ex, s in zip(self._executors, states, strict=True)])
+        states = self._scene.robot_states()
+        commands = np.stack([ex.step(s) for ex, s in zip(self._executors, states, strict=True)])
+        action = self._scene.env_actions(commands)
         elapsed = time.perf_counter() - t0
         capture_s = sum(loc.capture_s for loc in self._locators)
         self.stats.step_overhead_ms.append(1e3 * (elapsed - (capture_s - self.stats.capture_s)))
