@@ -65,7 +65,10 @@ NOT_RUN = "not run"
 NOT_TRAINED = "not trained yet"
 """Why a trainable column has no source."""
 
-METAWORLD_NOTE = "Meta-World is not in awda_bench yet (issue 28)"
+METAWORLD_NOTE = (
+    "not run: the Meta-World suites play scripted and gt-waypoints, but collect and train do not "
+    "take them yet (issue 28)"
+)
 """Why the Meta-World rows of Table S3 are empty on our side."""
 
 SUITE_TITLES = {"pick_place": "Pick-and-place", "mosaic": "MOSAIC"}
