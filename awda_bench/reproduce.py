@@ -345,6 +345,12 @@ def _eval_tasks(suite_name: str, hold_out: str | None) -> tuple[list[int], int]:
     return [], units
 
 
+def _eval_stage(key: str, evaluate: SweepConfig, left: int, arch: str, detail: str) -> Stage:
+    """``evaluate KEY``: ``evaluate``'s ``run`` command, ``left`` episodes to play (done at 0)."""
+    estimate = left * COSTS.eval_episode_s[arch] / evaluate.workers
+    return Stage(f"evaluate {key}", _run_argv(evaluate), estimate, left == 0, detail, evaluate)
+
+
 def plan_stages(config: ReproduceConfig) -> list[Stage]:
     """The pipeline for ``config``, each stage marked done or not (nothing runs here)."""
     from awda_bench.suites import load_suite
@@ -464,18 +470,12 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         # until training is done the snapshots to evaluate are not all there: plan all of them
         remaining = _eval_remaining(evaluate) if trained else None
         stages.append(
-            Stage(
-                f"evaluate {key}",
-                _run_argv(evaluate),
-                (n_eval if remaining is None else remaining)
-                * COSTS.eval_episode_s[column.arch]
-                / config.workers,
-                remaining == 0,
+            _eval_stage(
+                key, evaluate, n_eval if remaining is None else remaining, column.arch,
                 f"{config.snapshots} snapshots x {episodes} episodes x {units} "
                 f"{'family' if suite.episode_unit == 'family' else 'tasks'}",
-                evaluate,
             )
-        )
+        )  # fmt: skip
         if key == FIT_CHECK_COLUMN and config.fit_check and config.hold_out is None:
             train_tasks = tuple(t.index for t in suite.train_tasks[:FIT_CHECK_TASKS])
             fit = replace(
@@ -508,15 +508,10 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         remaining = _eval_remaining(evaluate) if trained else None
         n_eval = config.snapshots * episodes * units
         stages.append(
-            Stage(
-                f"evaluate {key}",
-                _run_argv(evaluate),
-                (n_eval if remaining is None else remaining)
-                * COSTS.eval_episode_s[COLUMN_KEYS[variant.trained].arch]
-                / config.workers,
-                remaining == 0,
+            _eval_stage(
+                key, evaluate, n_eval if remaining is None else remaining,
+                COLUMN_KEYS[variant.trained].arch,
                 f"{variant.trained}'s snapshots with --method {variant.method}",
-                evaluate,
             )
         )  # fmt: skip
     stages.append(

@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.episode import EpisodeContext, WristDepth
+from awda_bench.episode import EpisodeContext
 from awda_bench.metaworld.expert import expert_action, task_policy
-from awda_bench.metaworld.observations import WRIST_CAMERA, WRIST_SIZE
+from awda_bench.metaworld.observations import wrist_capture
 from awda_bench.metaworld.sawyer import (
     SAWYER_EXECUTOR,
     SAWYER_GRASP_MINING,
@@ -84,23 +84,6 @@ def expert_trajectory(
         truth={},
         meta={"expert_done": success_step > 0, "steps": len(actions), "success_step": success_step},
     )
-
-
-def wrist_capture(env: Any) -> WristDepth:
-    """The ``gripperPOV`` depth image of a :class:`~awda_bench.metaworld.env.MetaWorldEnv` now,
-    as the observations' ``wrist_depth()``."""
-    task_env = env.task_env
-    frame = env.renderer.capture(
-        task_env.model,
-        task_env.data,
-        WRIST_CAMERA,
-        height=WRIST_SIZE,
-        width=WRIST_SIZE,
-        rgb=False,
-        depth=True,
-    )
-    assert frame.depth_m is not None
-    return WristDepth(frame.depth_m[None], frame.intrinsic_cv[None], frame.cam2world_cv[None])
 
 
 class MetaWorldScene:

@@ -92,18 +92,7 @@ class MetaWorldObservations:
         return frame
 
     def wrist_depth(self) -> WristDepth:
-        env = self._env.task_env
-        frame = self._env.renderer.capture(
-            env.model,
-            env.data,
-            WRIST_CAMERA,
-            height=WRIST_SIZE,
-            width=WRIST_SIZE,
-            rgb=False,
-            depth=True,
-        )
-        assert frame.depth_m is not None
-        return WristDepth(frame.depth_m[None], frame.intrinsic_cv[None], frame.cam2world_cv[None])
+        return wrist_capture(self._env)
 
     def camera(self) -> tuple[np.ndarray, np.ndarray]:
         camera = self._env.suite.camera
@@ -142,3 +131,20 @@ class MetaWorldObservations:
         reset_to_layout(self._env.task_env, self._spec.seed)  # back to the episode's layout
         self._extras["demo_frames"] = list(frames)
         return frames
+
+
+def wrist_capture(env: Any) -> WristDepth:
+    """The ``gripperPOV`` depth image of a :class:`~awda_bench.metaworld.env.MetaWorldEnv` now
+    (what ``wrist_depth()`` returns; the gt-waypoints grasp primitive localizes with it too)."""
+    task_env = env.task_env
+    frame = env.renderer.capture(
+        task_env.model,
+        task_env.data,
+        WRIST_CAMERA,
+        height=WRIST_SIZE,
+        width=WRIST_SIZE,
+        rgb=False,
+        depth=True,
+    )
+    assert frame.depth_m is not None
+    return WristDepth(frame.depth_m[None], frame.intrinsic_cv[None], frame.cam2world_cv[None])
