@@ -12,6 +12,7 @@ imports ``mujoco``.
 - :mod:`.env`: a suite's tasks behind the harness's env interface;
 - :mod:`.observations`: what an observation-only policy sees;
 - :mod:`.expert`: the package's scripted policies as the ``scripted`` method;
+- :mod:`.rollout`: the expert played from a state as a recorded trajectory (plans, collection);
 - :mod:`.demo`: the demonstration video (the expert in the demo layout);
 - :mod:`.state`: save and restore a task env exactly;
 - :mod:`.sawyer`: the Sawyer as the motor primitives' robot (state, mocap driver, parameters);

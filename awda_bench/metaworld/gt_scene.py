@@ -5,8 +5,8 @@ localizer, and its actions.
 ::
 
     plan:     S = save_state(task env)                      the real start (.state)
-              the package's scripted policy from S, to its first success (or planning_steps),
-              recording TCP, finger distance, actions       -> Trajectory
+              the package's scripted policy from S, 5 steps past its first success (or
+              planning_steps), recording TCP, finger distance, actions (.rollout) -> Trajectory
               restore_state(task env, S)                    bit-identical to S
     act:      primitives' (4,) command -> mocap action      (awda_bench.metaworld.sawyer)
     grasp:    gripperPOV wrist depth (128 x 128) -> localize_object, as on ManiSkill
@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 from awda_bench.episode import EpisodeContext
-from awda_bench.metaworld.expert import expert_action, task_policy
 from awda_bench.metaworld.observations import wrist_capture
+from awda_bench.metaworld.rollout import AFTER_SUCCESS_STEPS, expert_rollout
 from awda_bench.metaworld.sawyer import (
     SAWYER_EXECUTOR,
     SAWYER_GRASP_MINING,
@@ -32,7 +32,6 @@ from awda_bench.metaworld.sawyer import (
     mocap_action,
     mocap_offset,
     robot_state,
-    tracking_command,
 )
 from awda_bench.metaworld.state import restore_state, save_state
 from awda_bench.primitives.base import RobotState
@@ -40,50 +39,20 @@ from awda_bench.primitives.config import LocalizationConfig
 from awda_bench.primitives.wrist_camera import WristLocator
 from awda_bench.trajectory import Trajectory
 
-AFTER_SUCCESS_STEPS = 5
-"""The plan runs this many steps past the expert's first success (the reference truncated its
-Meta-World demonstrations 5 frames after the first success): the last waypoint is then inside
-the success region, not on its edge."""
+__all__ = ["AFTER_SUCCESS_STEPS", "MetaWorldScene", "expert_trajectory"]
 
 
 def expert_trajectory(
     task_env: Any, task_name: str, max_steps: int, offset: np.ndarray
 ) -> Trajectory:
     """The package's scripted policy of ``task_name`` from ``task_env``'s current state, to
-    :data:`AFTER_SUCCESS_STEPS` past its first success, or ``max_steps``; ``task_env`` is restored
-    to that state afterwards.
-
-    ``actions[:, :3]`` are the expert's mocap targets as the primitives' commands
-    (:func:`~awda_bench.metaworld.sawyer.tracking_command` with the hand's ``offset``),
-    ``actions[:, 3]`` its gripper commands. ``meta["success_step"]``: the step (1-based) of the
-    first success, 0 if none."""
+    :data:`~awda_bench.metaworld.rollout.AFTER_SUCCESS_STEPS` past its first success, or
+    ``max_steps`` (:func:`~awda_bench.metaworld.rollout.expert_rollout`, whose trajectory it
+    returns); ``task_env`` is restored to that state afterwards."""
     start = save_state(task_env)
-    policy = task_policy(task_name)
-    obs = np.asarray(
-        task_env._last_stable_obs if task_env.curr_path_length else task_env._get_obs()
-    )
-    tcp, opening, actions = [], [], []
-    success_step = 0
-    for t in range(1, max_steps + 1):
-        state = robot_state(task_env)
-        tcp.append(state.tcp_pos)
-        opening.append(state.gripper_opening_m)
-        action = expert_action(policy, obs)[0]
-        obs, _reward, _terminated, _truncated, info = task_env.step(action)
-        command = tracking_command(state.tcp_pos, task_env.data.mocap_pos[0], offset)
-        actions.append([*command, action[3]])
-        if info.get("success", 0.0) and not success_step:
-            success_step = t
-        if success_step and t >= success_step + AFTER_SUCCESS_STEPS:
-            break
+    rollout = expert_rollout(task_env, task_name, max_steps, offset)
     restore_state(task_env, start)
-    return Trajectory(
-        tcp_pos=np.asarray(tcp, dtype=np.float64),
-        gripper_opening_m=np.asarray(opening, dtype=np.float64),
-        actions=np.asarray(actions, dtype=np.float32),
-        truth={},
-        meta={"expert_done": success_step > 0, "steps": len(actions), "success_step": success_step},
-    )
+    return rollout.trajectory
 
 
 class MetaWorldScene:

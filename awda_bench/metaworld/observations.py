@@ -133,16 +133,17 @@ class MetaWorldObservations:
         return frames
 
 
-def wrist_capture(env: Any) -> WristDepth:
-    """The ``gripperPOV`` depth image of a :class:`~awda_bench.metaworld.env.MetaWorldEnv` now
-    (what ``wrist_depth()`` returns; the gt-waypoints grasp primitive localizes with it too)."""
+def wrist_capture(env: Any, height: int = WRIST_SIZE, width: int = WRIST_SIZE) -> WristDepth:
+    """The ``gripperPOV`` depth image (``height`` x ``width`` px) of a
+    :class:`~awda_bench.metaworld.env.MetaWorldEnv` now (what ``wrist_depth()`` returns; the
+    gt-waypoints grasp primitive localizes with it too, and ``collect`` records it)."""
     task_env = env.task_env
     frame = env.renderer.capture(
         task_env.model,
         task_env.data,
         WRIST_CAMERA,
-        height=WRIST_SIZE,
-        width=WRIST_SIZE,
+        height=height,
+        width=width,
         rgb=False,
         depth=True,
     )
