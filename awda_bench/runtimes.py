@@ -61,6 +61,19 @@ def worker_python(simulator: str) -> str | None:
     return str(python)
 
 
+def check_local_workers(suite: str, simulator: str, workers: int, backend: str) -> None:
+    """Refuse, in one line, a schedule that would play ``simulator``'s episodes where its
+    environment is not: ``--workers 0`` plays in this process, and Ray actors start from the
+    cluster's environment; nothing to refuse for a simulator that runs here."""
+    if simulator not in SECOND_VENVS:
+        return
+    if workers == 0 or backend != "local":
+        raise UsageError(
+            f"suite {suite!r} runs in its own environment's worker processes: use "
+            "--backend local with --workers >= 1"
+        )
+
+
 def worker_versions(simulator: str) -> dict[str, str]:
     """Versions of the packages in ``simulator``'s worker environment, keyed
     ``"<environment> <package>"`` (empty for a simulator that runs in this one): a run's record

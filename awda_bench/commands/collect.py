@@ -7,7 +7,6 @@ import sys
 from pathlib import Path
 
 from awda_bench.data.config import (
-    DEFAULT_IMAGE_SIZE,
     EMBODIMENT_CHOICES,
     SPLITS,
     CollectConfig,
@@ -32,7 +31,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "truth and env state. Re-running the same command resumes; exit 1 if attempts ended in "
         "errors (re-run to retry them).",
     )
-    parser.add_argument("--suite", required=True, help="suite name (pick_place, mosaic)")
+    parser.add_argument("--suite", required=True, help="suite name (pick_place, mosaic, metaworld)")
     parser.add_argument("--split", default="train", help=f"one of {', '.join(SPLITS)}")
     parser.add_argument(
         "--embodiment", default="both", help=f"one of {', '.join(EMBODIMENT_CHOICES)}"
@@ -47,8 +46,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     add_backend_args(parser)
     parser.add_argument(
         "--image-size",
-        default="x".join(map(str, DEFAULT_IMAGE_SIZE)),
-        help="third-person frame HxW (default 240x320; at least 64x64)",
+        default=None,
+        help="third-person frame HxW (default: the suite's camera size, 240x320 on pick_place and "
+        "mosaic, 224x224 on metaworld; at least 64x64)",
     )
     parser.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
     parser.add_argument(
@@ -94,7 +94,7 @@ def config_from_args(args: argparse.Namespace) -> CollectConfig:
         workers=args.workers,
         backend=args.backend,
         ray_address=args.ray_address,
-        image_size=parse_image_size(args.image_size),
+        image_size=None if args.image_size is None else parse_image_size(args.image_size),
         seed=args.seed,
         synthesize=synthesize,
         tasks=tasks,

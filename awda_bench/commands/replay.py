@@ -59,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
                 f"--traj-path {path}: need an existing .h5 trajectory file with its .json beside "
                 "it (written by python -m awda_bench collect)"
             )
+        _refuse_other_simulators(h5)
     argv = ["--help" if a == "--help-maniskill" else a for a in argv]
 
     from mani_skill.trajectory import replay_trajectory
@@ -67,3 +68,22 @@ def run(args: argparse.Namespace) -> int:
 
     replay_trajectory.main(replay_trajectory.parse_args(argv))
     return 0
+
+
+def _refuse_other_simulators(h5: Path) -> None:
+    """A Meta-World collection's files share ManiSkill's layout but not its simulator: refused in
+    one line naming how those episodes are replayed."""
+    import json
+
+    from awda_bench.metaworld_tasks import ALL_TASKS
+
+    try:
+        env_id = str(json.loads(h5.with_suffix(".json").read_text())["env_info"]["env_id"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise UsageError(f"--traj-path {h5}: its .json is unreadable ({exc})") from exc
+    if env_id in ALL_TASKS:
+        raise UsageError(
+            f"--traj-path {h5} holds {env_id!r} episodes (Meta-World), which ManiSkill cannot "
+            "replay; replay one with awda_bench.metaworld.layout.reset_to_layout(env, "
+            "episode_seed) and its actions"
+        )

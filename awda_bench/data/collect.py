@@ -3,6 +3,7 @@
 Order of work, so that bad input never touches DATA_DIR::
 
     plan (suite, split, tasks, seeds, definition)          may refuse; nothing written yet
+    -> the workers' environment (Meta-World: .venv-metaworld) is there, else one line
     -> check DATA_DIR: writable; empty, or holding a manifest with the same fingerprint
     -> manifest.json (complete: false) -> per unit: finished file pair, or shards to resume from
     -> jobs for the missing attempts -> workers -> each result: shard or discard marker
@@ -42,6 +43,7 @@ from awda_bench.data.trajectory_file import (
     write_shard,
 )
 from awda_bench.errors import CorruptFileError, ProtocolMismatchError, UsageError
+from awda_bench.runtimes import worker_python
 
 MANIFEST = "manifest.json"
 """The collection's manifest inside DATA_DIR."""
@@ -203,6 +205,8 @@ def collection_progress(config: CollectConfig) -> tuple[int, int]:
 def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> CollectResult:
     """Record every pending episode of ``config`` into ``config.out`` (see the module docstring)."""
     plan = make_plan(config)
+    if runner is None:
+        worker_python(plan.suite.simulator)  # its environment is missing: one line, nothing written
     root = config.out
     previous_code = check_data_dir(root, plan)
     result = CollectResult(planned=sum(u.planned for u in plan.units))

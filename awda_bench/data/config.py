@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from awda_bench.errors import UnknownChoiceError, UsageError
-from awda_bench.suites import SUITES_DIR
+from awda_bench.suites import SUITES_DIR, Suite
 
 SPLITS: tuple[str, ...] = ("train", "test")
 """``train``: the suite's training tasks; ``test``: its held-out (evaluated) tasks."""
@@ -21,9 +21,6 @@ ROLE_SYNTHESIZED = "synthesized"
 ROLES: tuple[str, ...] = (ROLE_AGENT, ROLE_DEMONSTRATOR, ROLE_SYNTHESIZED)
 """Who produced a unit's episodes: a scripted expert of an embodiment, or trajectory synthesis
 (free-space motion through random waypoints, recorded by the agent)."""
-
-DEFAULT_IMAGE_SIZE: tuple[int, int] = (240, 320)
-"""Third-person frame (height, width) [px]: the reference pick-and-place images."""
 
 DEFAULT_DEPTH_SIZE: tuple[int, int] = (128, 128)
 """Wrist depth frame (height, width) [px]: ``TosviConfig``'s default depth input."""
@@ -104,8 +101,10 @@ class CollectConfig:
     """Where workers run: ``"local"`` processes or ``"ray"`` actors (not part of the data)."""
     ray_address: str | None = None
     """Ray cluster to join with ``backend="ray"``; ``None`` starts a private local instance."""
-    image_size: tuple[int, int] = DEFAULT_IMAGE_SIZE
-    """Third-person frame (height, width) [px]."""
+    image_size: tuple[int, int] | None = None
+    """Third-person frame (height, width) [px]; ``None``: the suite's camera size (its file's
+    ``[camera]``: 240x320 on the ManiSkill suites, the reference pick-and-place images; 224x224
+    on Meta-World's, Table S2's size there). See :meth:`frame_size`."""
     depth_size: tuple[int, int] = DEFAULT_DEPTH_SIZE
     """Agent wrist depth frame (height, width) [px]."""
     seed: int = 0
@@ -158,6 +157,12 @@ class CollectConfig:
             raise UsageError(f"chunk_episodes must be >= 1, got {self.chunk_episodes}")
         if self.max_attempts_factor < 1:
             raise UsageError(f"max_attempts_factor must be >= 1, got {self.max_attempts_factor}")
+
+    def frame_size(self, suite: Suite) -> tuple[int, int]:
+        """The third-person frame (height, width) [px] recorded from ``suite``."""
+        if self.image_size is not None:
+            return self.image_size
+        return (suite.camera.height, suite.camera.width)
 
     @property
     def expert_roles(self) -> tuple[str, ...]:

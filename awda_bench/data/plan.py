@@ -33,6 +33,8 @@ from pathlib import Path
 from awda_bench.data.config import ROLE_SYNTHESIZED, CollectConfig
 from awda_bench.errors import UsageError
 from awda_bench.harness.episode_specs import derive_seed
+from awda_bench.metaworld_tasks import check_task_names
+from awda_bench.runtimes import check_local_workers
 from awda_bench.suites import Suite, TaskDef, load_suite
 
 FORMAT_VERSION = 1
@@ -47,7 +49,9 @@ CODE_PATHS: tuple[str, ...] = (
     "demo_recording.py",
     "trajectory.py",
     "data/recorder.py",
+    "data/metaworld_recorder.py",
     "data/trajectory_file.py",
+    "metaworld",
 )
 """Package paths whose source decides what an episode records. Their hash is stamped on every
 episode (``code_sha256``) and listed in the manifest, but is not part of the fingerprint: a
@@ -173,16 +177,34 @@ class CollectPlan:
         return factor * unit.planned + 10
 
 
+def check_metaworld_collection(suite: Suite, config: CollectConfig) -> None:
+    """What a Meta-World collection refuses before anything runs: task names the package lacks,
+    ``--workers 0`` or Ray (its episodes play in ``.venv-metaworld`` workers), and trajectory
+    synthesis (not implemented there: :class:`~awda_bench.data.config.SynthesisConfig`'s
+    waypoint box is pick-and-place's world frame, above its bins; Meta-World's scenes need their
+    own box per task, clear of fixtures that stand up to ~30 cm (doors, shelves, the hoop))."""
+    check_task_names(suite)
+    check_local_workers(suite.name, suite.simulator, config.workers, config.backend)
+    if config.synthesize:
+        raise UsageError(
+            f"--synthesize is not implemented on {suite.name!r}: the synthesis waypoint box is "
+            "pick-and-place's world frame, Meta-World's scenes need their own; drop --synthesize"
+        )
+
+
 def make_plan(config: CollectConfig) -> CollectPlan:
     """Validate ``config`` against its suite and list the units; writes nothing."""
     suite = load_suite(config.suite, config.suites_dir)
-    from awda_bench.experts import EXPERT_SUITES
+    if suite.simulator == "metaworld":
+        check_metaworld_collection(suite, config)
+    else:
+        from awda_bench.experts import EXPERT_SUITES
 
-    if suite.name not in EXPERT_SUITES:
-        raise UsageError(
-            f"suite {suite.name!r} has no scripted expert to collect with; "
-            f"choose one of: {', '.join(EXPERT_SUITES)}"
-        )
+        if suite.name not in EXPERT_SUITES:
+            raise UsageError(
+                f"suite {suite.name!r} has no scripted expert to collect with; "
+                f"choose one of: {', '.join((*EXPERT_SUITES, 'metaworld', 'metaworld_ml45'))}"
+            )
     tasks = split_tasks(suite, config.split)
     available = [t.index for t in tasks]
     for index in config.tasks:
@@ -221,7 +243,7 @@ def make_plan(config: CollectConfig) -> CollectPlan:
         "episodes_per_task": config.episodes_per_task,
         "synthesize": config.synthesize,
         "seed": config.seed,
-        "image_size": list(config.image_size),
+        "image_size": list(config.frame_size(suite)),
         "depth_size": list(config.depth_size),
         "jpeg_quality": config.jpeg_quality,
         "synthesis": asdict(config.synthesis),

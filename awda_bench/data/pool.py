@@ -6,7 +6,7 @@ out, so another backend (Ray, :mod:`awda_bench.data.ray_runner`) implements :cla
 same way::
 
     parent                                  worker k (spawned; OMP_NUM_THREADS=1)
-      start ------------------------------>   recorder = EpisodeRecorder(config)
+      start ------------------------------>   recorder = make_recorder(config)
             <------------------------- ("ready", pid)
       CollectJob ------------------------->   fresh env; replay the unit's done attempts,
                                               record its next `chunk` successful ones
@@ -15,6 +15,9 @@ same way::
       ... watchdog: a job older than job_timeout_s -> kill worker, error result, respawn
       None ------------------------------->   close envs, exit
 
+Workers of a Meta-World suite start from ``.venv-metaworld``'s interpreter
+(:mod:`awda_bench.harness.interpreter_process`) and hold a
+:class:`~awda_bench.data.metaworld_recorder.MetaWorldRecorder`; the conversation is the same.
 A worker that cannot build its recorder stops the collection
 (:class:`~awda_bench.harness.job_pool.WorkerStartError`).
 """
@@ -26,12 +29,14 @@ from collections import deque
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from functools import partial
-from typing import Protocol
+from typing import Any, Protocol
 
 from awda_bench.data.config import CollectConfig
 from awda_bench.data.plan import Attempt, CollectJob, make_attempt
 from awda_bench.data.recorder import EpisodeData, EpisodeRecorder
 from awda_bench.harness.process_pool import ProcessPool
+from awda_bench.runtimes import worker_python
+from awda_bench.suites import Suite, load_suite
 
 
 @dataclass
@@ -46,6 +51,34 @@ class JobResult:
     """Traceback or watchdog message; the unit is left unfinished (retried on re-run)."""
     gave_up: bool = False
     """The unit reached ``job.max_attempts`` without ``job.planned`` successes."""
+
+
+class Recorder(Protocol):
+    """What a worker records jobs with: :class:`~awda_bench.data.recorder.EpisodeRecorder`
+    (ManiSkill) or :class:`~awda_bench.data.metaworld_recorder.MetaWorldRecorder`."""
+
+    config: CollectConfig
+    suite: Suite
+
+    def build_env(self, task: int, role: str) -> tuple[Any, dict[str, Any]]: ...
+
+    def env_for(self, task: int, role: str) -> tuple[Any, dict[str, Any]]: ...
+
+    def record(self, env: Any, env_info: dict[str, Any], job: Attempt) -> EpisodeData: ...
+
+    def replay(self, env: Any, job: Attempt) -> None: ...
+
+    def close(self) -> None: ...
+
+
+def make_recorder(config: CollectConfig) -> Recorder:
+    """The recorder of ``config``'s suite's simulator (Meta-World's is imported only here: it
+    runs in ``.venv-metaworld`` workers)."""
+    if load_suite(config.suite, config.suites_dir).simulator == "metaworld":
+        from awda_bench.data.metaworld_recorder import MetaWorldRecorder
+
+        return MetaWorldRecorder(config)
+    return EpisodeRecorder(config)
 
 
 OnResult = Callable[[JobResult], Iterable[CollectJob]]
@@ -101,7 +134,7 @@ def job_timeout_s(config: CollectConfig, job: CollectJob | None) -> float:
     return config.episode_timeout_s * (job.chunk + len(job.kept) + len(job.discarded))
 
 
-def play(recorder: EpisodeRecorder, job: CollectJob) -> JobResult:
+def play(recorder: Recorder, job: CollectJob) -> JobResult:
     """Record ``job`` in a freshly built env (closed afterwards)."""
     try:
         env, env_info = recorder.build_env(job.task, job.role)
@@ -125,7 +158,7 @@ class InlineRunner:
         self.config = config
 
     def run(self, jobs: Sequence[CollectJob], on_result: OnResult) -> None:
-        recorder = EpisodeRecorder(self.config)
+        recorder = make_recorder(self.config)
         queue = deque(jobs)
         try:
             while queue:
@@ -140,7 +173,7 @@ class RecorderExecutor:
     its own fresh env (:func:`play`)."""
 
     def __init__(self, config: CollectConfig) -> None:
-        self.recorder = EpisodeRecorder(config)
+        self.recorder = make_recorder(config)
         self.recorder.env_for(self.recorder.suite.tasks[0].index, "agent")
         self.recorder.close()
 
@@ -158,7 +191,9 @@ def lost_job_result(job: CollectJob, message: str, elapsed_s: float) -> JobResul
 
 
 class ProcessRunner(ProcessPool[CollectJob, JobResult]):
-    """Record jobs on ``workers`` spawned processes (the local backend of ``collect``)."""
+    """Record jobs on ``workers`` spawned processes (the local backend of ``collect``); a suite
+    whose simulator has an environment of its own (Meta-World) gets workers started from that
+    environment's interpreter (:mod:`awda_bench.runtimes`)."""
 
     worker_noun = "collect worker"
     job_noun = "job"
@@ -172,3 +207,4 @@ class ProcessRunner(ProcessPool[CollectJob, JobResult]):
             job_timeout_s=partial(job_timeout_s, config),
             start_timeout_s=start_timeout_s,
         )
+        self.python = worker_python(load_suite(config.suite, config.suites_dir).simulator)

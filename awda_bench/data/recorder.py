@@ -35,6 +35,7 @@ from awda_bench.data.config import (
 )
 from awda_bench.data.plan import Attempt, code_sha256
 from awda_bench.suites import Suite, load_suite
+from awda_bench.trajectory import Trajectory
 
 ENV_CACHE_SIZE = 4
 """Envs a worker keeps built (LRU); MOSAIC units switch env ids, pick-and-place needs two."""
@@ -125,7 +126,7 @@ class EpisodeRecorder:
     def env_kwargs(self, uid: str, control_mode: str) -> dict[str, Any]:
         """``gym.make`` keyword arguments recorded in the trajectory file (render backend aside:
         it depends on the machine, not on the data)."""
-        height, width = self.config.image_size
+        height, width = self.config.frame_size(self.suite)
         sensors: dict[str, Any] = {"third_person": {"height": height, "width": width}}
         if uid == "panda_awda":
             dh, dw = self.config.depth_size
@@ -202,7 +203,12 @@ class EpisodeRecorder:
         seed_globals(job.seed)
         reset_kwargs = {"seed": job.seed, "options": {"task": task.reset_task}}
         obs, info = env.reset(**reset_kwargs)
-        rec = _Recording(env, self.config, with_depth=job.role != ROLE_DEMONSTRATOR)
+        rec = _Recording(
+            env,
+            self.config,
+            with_depth=job.role != ROLE_DEMONSTRATOR,
+            image_size=self.config.frame_size(self.suite),
+        )
         if job.role == ROLE_SYNTHESIZED:
             success, extra_meta = self._play_synthesis(env, rec, job.seed)
             info = rec.last_info
@@ -341,14 +347,24 @@ def _numpy(value: Any) -> np.ndarray:
     return np.asarray(value)
 
 
-class _Recording(_Stepper):
-    """Accumulates one episode's per-state and per-action arrays."""
+class EpisodeArrays:
+    """One episode's per-state and per-action arrays as a recorder accumulates them, and the
+    :class:`EpisodeData` they become: the one place the recorded layout is assembled, whichever
+    simulator captured the states (ManiSkill's :class:`_Recording`; Meta-World's
+    :mod:`awda_bench.data.metaworld_recorder`)."""
 
-    def __init__(self, env: Any, config: CollectConfig, with_depth: bool) -> None:
-        super().__init__(env)
-        self.base = env.unwrapped
+    def __init__(
+        self,
+        config: CollectConfig,
+        with_depth: bool,
+        third_person: dict[str, np.ndarray],
+        image_size: tuple[int, int],
+    ) -> None:
         self.config = config
         self.with_depth = with_depth
+        self.third_person = third_person
+        """The fixed third-person camera's ``intrinsic_cv``, ``extrinsic_cv``, ``cam2world_gl``."""
+        self.image_size = image_size
         self.jpeg: list[bytes] = []
         self.depth_mm: list[np.ndarray] = []
         self.wrist_intrinsic: list[np.ndarray] = []
@@ -362,63 +378,72 @@ class _Recording(_Stepper):
         self.actions: list[np.ndarray] = []
         self.success: list[bool] = []
         self.render_s = 0.0
-        self.third_person = _camera_params(env, "third_person")
+        """Time spent capturing and encoding frames [s] (the capturing recorder adds to it)."""
 
-    def capture_state(self, truth: bool) -> None:
-        from awda_bench.robot.cameras import capture_rgb, capture_wrist_depth
-
-        base = self.base
-        t0 = time.perf_counter()
-        rgb = capture_rgb(self.env, "third_person")[0]
+    def add_frames(self, rgb: np.ndarray, wrist: Any | None) -> None:
+        """One state's third-person ``(H, W, 3)`` uint8 RGB (JPEG-encoded here) and, when this
+        episode records depth, its wrist depth (``depth_m``, ``intrinsic_cv``, ``cam2world_cv``
+        with a leading batch dimension of 1, as :class:`~awda_bench.episode.WristDepth`)."""
         self.jpeg.append(encode_jpeg(rgb, self.config.jpeg_quality))
         if self.with_depth:
-            depth = capture_wrist_depth(self.env)
-            mm = np.clip(np.round(depth.depth_m[0] * 1000.0), 0, np.iinfo(np.uint16).max)
+            assert wrist is not None
+            mm = np.clip(np.round(wrist.depth_m[0] * 1000.0), 0, np.iinfo(np.uint16).max)
             self.depth_mm.append(mm.astype(np.uint16)[..., None])
-            self.wrist_intrinsic.append(depth.intrinsic_cv[0].astype(np.float32))
-            self.wrist_cam2world.append(depth.cam2world_cv[0].astype(np.float32))
-        self.render_s += time.perf_counter() - t0
-        self.tcp_pose.append(_numpy(base.agent.tcp_pose.raw_pose)[0].astype(np.float32))
-        self.opening.append(float(base.gripper_opening_m()[0]))
-        self.qpos.append(_numpy(base.agent.robot.get_qpos())[0].astype(np.float32))
-        self.qvel.append(_numpy(base.agent.robot.get_qvel())[0].astype(np.float32))
-        self.states.append(_to_numpy_tree(base.get_state_dict()))
-        if truth:
-            for name, value in base.truth_signals().items():
-                self.truth.setdefault(name, []).append(bool(_numpy(value).reshape(-1)[0]))
+            self.wrist_intrinsic.append(np.asarray(wrist.intrinsic_cv[0], dtype=np.float32))
+            self.wrist_cam2world.append(np.asarray(wrist.cam2world_cv[0], dtype=np.float32))
 
-    def step(self, action: np.ndarray) -> Any:
-        obs, _, _, _, info = self.env.step(action)
+    def add_state(
+        self,
+        *,
+        tcp_pose: np.ndarray,
+        opening_m: float,
+        qpos: np.ndarray,
+        qvel: np.ndarray,
+        env_state: Any,
+        truth: dict[str, bool] | None = None,
+    ) -> None:
+        """One state's robot and env arrays: TCP pose (7,) xyz [m] + wxyz, gripper opening [m],
+        joint positions and velocities, the env state tree, and the truths of the state an action
+        is taken from (``None`` for the last state)."""
+        self.tcp_pose.append(np.asarray(tcp_pose, dtype=np.float32))
+        self.opening.append(float(opening_m))
+        self.qpos.append(np.asarray(qpos, dtype=np.float32))
+        self.qvel.append(np.asarray(qvel, dtype=np.float32))
+        self.states.append(env_state)
+        for name, value in (truth or {}).items():
+            self.truth.setdefault(name, []).append(bool(value))
+
+    def add_action(self, action: np.ndarray, success: bool) -> None:
+        """The env action taken from the last state and the env's success flag after it."""
         self.actions.append(np.asarray(action, dtype=np.float32).reshape(4))
-        self.success.append(bool(_numpy(info["success"]).reshape(-1)[0]))
-        self.last_info = info
-        return obs
+        self.success.append(bool(success))
 
-    def finish(self, job: Attempt, success: bool) -> EpisodeData:
-        from awda_bench.mining import PressMiningConfig, mine_grasp, mine_press
-        from awda_bench.trajectory import Trajectory
+    def trajectory(self, close_when_positive: bool = True) -> Trajectory:
+        """States 0..T-1 and the actions as attribute mining reads them (gripper ``> 0``
+        closes: the sign flipped when the env's does not)."""
+        T = len(self.actions)
+        tcp_pose = np.stack(self.tcp_pose)
+        opening = np.asarray(self.opening, dtype=np.float32)
+        method_actions = np.asarray(self.actions, dtype=np.float32).reshape(T, 4).copy()
+        if not close_when_positive:
+            method_actions[:, 3] = -method_actions[:, 3]
+        return Trajectory(
+            tcp_pos=tcp_pose[:T, :3].astype(np.float64),
+            gripper_opening_m=opening[:T].astype(np.float64),
+            actions=method_actions,
+            truth=self.truth_arrays(),
+        )
 
+    def truth_arrays(self) -> dict[str, np.ndarray]:
+        return {k: np.asarray(v, dtype=bool) for k, v in self.truth.items()}
+
+    def finish(self, job: Attempt, success: bool, attributes: dict[str, np.ndarray]) -> EpisodeData:
+        """The episode (``attributes``: the ``(T,)`` mined attributes, ``grasp`` and ``press``)."""
         T = len(self.actions)
         n = T + 1
         tcp_pose = np.stack(self.tcp_pose)
         opening = np.asarray(self.opening, dtype=np.float32)
         actions = np.asarray(self.actions, dtype=np.float32).reshape(T, 4)
-        method_actions = actions.copy()
-        if not self.base.embodiment.close_when_positive:
-            method_actions[:, 3] = -method_actions[:, 3]
-        truth = {k: np.asarray(v, dtype=bool) for k, v in self.truth.items()}
-        trajectory = Trajectory(
-            tcp_pos=tcp_pose[:T, :3].astype(np.float64),
-            gripper_opening_m=opening[:T].astype(np.float64),
-            actions=method_actions,
-            truth=truth,
-        )
-        attributes = {
-            "grasp": mine_grasp(trajectory),
-            "press": mine_press(
-                trajectory, PressMiningConfig(max_step_m=self.base.embodiment.max_step_m)
-            ),
-        }
         tp = self.third_person
         obs: dict[str, Any] = {
             "agent": {"qpos": np.stack(self.qpos), "qvel": np.stack(self.qvel)},
@@ -433,7 +458,7 @@ class _Recording(_Stepper):
                 "intrinsic_cv": np.stack(self.wrist_intrinsic),
                 "cam2world_cv": np.stack(self.wrist_cam2world),
             }
-        height, width = self.config.image_size
+        height, width = self.image_size
         meta: dict[str, Any] = {
             "image_size": [height, width],
             "camera": {k: v.tolist() for k, v in tp.items()},
@@ -448,8 +473,61 @@ class _Recording(_Stepper):
             obs=obs,
             env_states=_stack_trees(self.states),
             attributes=attributes,
-            truth=truth,
+            truth=self.truth_arrays(),
             meta=meta,
             env_info={},
             timing={"render_s": self.render_s, "frames": float(frames)},
         )
+
+
+class _Recording(_Stepper):
+    """Captures one ManiSkill episode's states into :class:`EpisodeArrays`."""
+
+    def __init__(
+        self, env: Any, config: CollectConfig, with_depth: bool, image_size: tuple[int, int]
+    ) -> None:
+        super().__init__(env)
+        self.base = env.unwrapped
+        self.arrays = EpisodeArrays(
+            config, with_depth, _camera_params(env, "third_person"), image_size
+        )
+
+    def capture_state(self, truth: bool) -> None:
+        from awda_bench.robot.cameras import capture_rgb, capture_wrist_depth
+
+        base, arrays = self.base, self.arrays
+        t0 = time.perf_counter()
+        rgb = capture_rgb(self.env, "third_person")[0]
+        arrays.add_frames(rgb, capture_wrist_depth(self.env) if arrays.with_depth else None)
+        arrays.render_s += time.perf_counter() - t0
+        arrays.add_state(
+            tcp_pose=_numpy(base.agent.tcp_pose.raw_pose)[0],
+            opening_m=float(base.gripper_opening_m()[0]),
+            qpos=_numpy(base.agent.robot.get_qpos())[0],
+            qvel=_numpy(base.agent.robot.get_qvel())[0],
+            env_state=_to_numpy_tree(base.get_state_dict()),
+            truth={
+                name: bool(_numpy(value).reshape(-1)[0])
+                for name, value in base.truth_signals().items()
+            }
+            if truth
+            else None,
+        )
+
+    def step(self, action: np.ndarray) -> Any:
+        obs, _, _, _, info = self.env.step(action)
+        self.arrays.add_action(action, bool(_numpy(info["success"]).reshape(-1)[0]))
+        self.last_info = info
+        return obs
+
+    def finish(self, job: Attempt, success: bool) -> EpisodeData:
+        from awda_bench.mining import PressMiningConfig, mine_grasp, mine_press
+
+        trajectory = self.arrays.trajectory(self.base.embodiment.close_when_positive)
+        attributes = {
+            "grasp": mine_grasp(trajectory),
+            "press": mine_press(
+                trajectory, PressMiningConfig(max_step_m=self.base.embodiment.max_step_m)
+            ),
+        }
+        return self.arrays.finish(job, success, attributes)

@@ -40,7 +40,7 @@ from awda_bench.harness.worker_pool import (
     run_inline,
 )
 from awda_bench.metaworld_tasks import check_task_names
-from awda_bench.runtimes import worker_python, worker_versions
+from awda_bench.runtimes import check_local_workers, worker_python, worker_versions
 from awda_bench.serving.remote_policy import DEFAULT_TIMEOUT_S
 from awda_bench.suites import SIMULATORS, SUITES_DIR, Suite, load_suite
 
@@ -212,11 +212,7 @@ def check_runtime(suite: Suite, config: SweepConfig) -> None:
         check_task_names(suite)
     if suite.simulator == SIMULATORS[0]:
         return
-    if config.workers == 0 or config.backend != "local":
-        raise UsageError(
-            f"suite {suite.name!r} runs in its own environment's worker processes: use "
-            "--backend local with --workers >= 1"
-        )
+    check_local_workers(suite.name, suite.simulator, config.workers, config.backend)
     worker_python(suite.simulator)
 
 
