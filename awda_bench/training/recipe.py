@@ -21,6 +21,8 @@ Layout::
     [train]   batch_size, learning_rate, max_steps, snapshot_every_steps,
               validate_every_steps, validation_batches, seed
     [augment] adm_lambda_low, adm_lambda_high, shift_px, brightness, contrast, saturation
+    [suite.<name>.model]  [model] fields that differ on that suite's collections (optional; e.g.
+              Meta-World's 224x224 frames); ``train`` applies them (:meth:`Recipe.for_suite`)
 """
 
 from __future__ import annotations
@@ -224,16 +226,32 @@ class Recipe:
     augment: AugmentRecipe = field(default_factory=AugmentRecipe)
     path: Path | None = None
     """The file it was read from."""
+    suite_models: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Suite -> ``[model]`` fields that differ on that suite's collections (the ``[suite.<name>.
+    model]`` tables: Meta-World's 224x224 frames); applied by :meth:`for_suite`."""
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain data (what snapshots and ``train.json`` record); ``path`` left out."""
-        return {
+        """Plain data (what snapshots and ``train.json`` record); ``path`` left out, and the
+        per-suite tables only while not applied (``train`` records :meth:`for_suite`'s)."""
+        out: dict[str, Any] = {
             "name": self.name,
             "suites": list(self.suites),
             "model": config_to_dict(self.model),
             "train": config_to_dict(self.train),
             "augment": config_to_dict(self.augment),
         }
+        if self.suite_models:
+            out["suite_models"] = json.loads(json.dumps(self.suite_models))
+        return out
+
+    def for_suite(self, suite: str) -> Recipe:
+        """The recipe as it trains on a collection of ``suite``: that suite's ``[model]``
+        overrides applied, none left."""
+        from dataclasses import replace
+
+        overrides = self.suite_models.get(suite, {})
+        model = config_from_dict(ModelRecipe, {**config_to_dict(self.model), **overrides})
+        return replace(self, model=model, suite_models={})
 
     @property
     def sha256(self) -> str:
@@ -273,17 +291,30 @@ def load_recipe(name_or_path: str, recipes_dir: Path = RECIPES_DIR) -> Recipe:
         raw = tomllib.loads(path.read_text())
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise CorruptFileError(f"recipe {path} is not valid TOML ({exc})") from exc
-    known = {"name", "suites", "model", "train", "augment"}
+    known = {"name", "suites", "model", "train", "augment", "suite"}
     unknown = sorted(set(raw) - known)
     if unknown:
         raise UsageError(f"recipe {path} has unknown key(s) {unknown}; valid: {sorted(known)}")
     if not isinstance(raw.get("name"), str) or not raw.get("suites"):
         raise UsageError(f"recipe {path} needs a name and a non-empty suites list")
-    return Recipe(
+    suites = tuple(str(s) for s in raw["suites"])
+    suite_models: dict[str, dict[str, Any]] = {}
+    for suite, table in raw.get("suite", {}).items():
+        if suite not in suites or not isinstance(table, dict) or set(table) - {"model"}:
+            raise UsageError(
+                f"recipe {path}: [suite.{suite}] must name one of its suites ({', '.join(suites)}) "
+                "and hold only a [suite.<name>.model] table"
+            )
+        suite_models[suite] = dict(table.get("model", {}))
+    recipe = Recipe(
         name=raw["name"],
-        suites=tuple(str(s) for s in raw["suites"]),
+        suites=suites,
         model=config_from_dict(ModelRecipe, raw.get("model", {})),
         train=config_from_dict(TrainRecipe, raw.get("train", {})),
         augment=config_from_dict(AugmentRecipe, raw.get("augment", {})),
         path=path,
+        suite_models=suite_models,
     )
+    for suite in suite_models:
+        recipe.for_suite(suite)  # a bad override is refused here, naming the field
+    return recipe

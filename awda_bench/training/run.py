@@ -145,7 +145,7 @@ def open_data(path: Path, recipe: Recipe, column: Column, what: str) -> Collecte
             f"{what} {path} holds a {suite!r} collection; recipe {recipe.name!r} trains on "
             f"{', '.join(recipe.suites)}"
         )
-    m = recipe.model
+    m = recipe.for_suite(suite).model
     size = tuple(definition.get("image_size", ()))
     want = (m.image_height_px, m.image_width_px)
     # Larger frames are area-downscaled by the dataset exactly as the evaluated policies downscale
@@ -182,8 +182,11 @@ def check_hold_out(data: CollectedData, family: str) -> None:
 def identity(record: dict[str, Any]) -> dict[str, Any]:
     """The part of a ``train.json`` record that must match to resume (schedule excluded). A recipe
     field added after the run started (absent from its record) counts at its default, which is
-    what the run trained with; an AWDA column ignores the T-OSVI-only fields."""
+    what the run trained with; an AWDA column ignores the T-OSVI-only fields, and the recipe's
+    ``suites`` list is left out (the data's fingerprint says what the run trains on; Meta-World
+    joining the list does not change a pick-and-place run)."""
     recipe = json.loads(json.dumps(record["recipe"]))
+    recipe.pop("suites", None)
     for table, cls in (("model", ModelRecipe), ("train", TrainRecipe), ("augment", AugmentRecipe)):
         recipe[table] = {**config_to_dict(cls()), **recipe.get(table, {})}
     if record["column"].get("arch") == "awda":
@@ -437,6 +440,7 @@ def run_training(request: TrainRequest) -> TrainOutcome:
     recipe = load_recipe(request.recipe).with_schedule(request.steps, request.snapshot_every)
     device = resolve_device(request.device)
     data = open_data(request.data, recipe, column, "--data")
+    recipe = recipe.for_suite(str(data.manifest["definition"].get("suite")))
     if data.split != "train":
         raise UsageError(
             f"--data {request.data} is a {data.split!r}-split collection; train on a train split "
