@@ -5,6 +5,7 @@ Data flows one way, mirroring the evaluation path (suite -> specs -> workers -> 
     suite + CollectConfig --plan.py--> units, seeded attempts (fixed before scheduling)
         --pool.py (worker processes)--> one CollectJob per unit chunk: fresh env, earlier attempts
           replayed, recorder.py records the next ones: EpisodeData (frames as JPEG)
+          (Meta-World: workers from .venv-metaworld, metaworld_recorder.py, the same EpisodeData)
         --trajectory_file.py--> one shard per episode (atomic) --> one ManiSkill file per unit
         --collect.py--> manifest.json (fingerprint, counts)
     DATA_DIR --datasets.py--> torch Datasets in the batch formats of awda_bench.models

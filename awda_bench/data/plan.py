@@ -19,7 +19,10 @@ size, and a run resumed after a kill record byte-identical episodes (see :class:
 Splits: pick-and-place (``episode_unit = "task"``) trains on tasks 0-13 and holds out 14-15. For
 MOSAIC (``episode_unit = "family"``) the held-out unit is a whole family, so ``train`` collects
 every family (a leave-one-family-out training set is a selection of files) and ``test`` the
-evaluated tasks, under seeds disjoint from ``train``'s.
+evaluated tasks, under seeds disjoint from ``train``'s. Meta-World (``episode_unit = "task"``)
+trains on its 45 tasks and holds out the suite's five; its units replay nothing (its layouts do
+not depend on the env's history, :mod:`awda_bench.data.metaworld_recorder`), and the rule above
+holds trivially.
 """
 
 from __future__ import annotations
