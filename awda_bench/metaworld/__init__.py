@@ -16,6 +16,8 @@ imports ``mujoco``.
 - :mod:`.demo`: the demonstration video (the expert in the demo layout);
 - :mod:`.state`: save and restore a task env exactly;
 - :mod:`.sawyer`: the Sawyer as the motor primitives' robot (state, mocap driver, parameters);
+- :mod:`.sawyer_interface`: that robot in one episode, read through its observations (what
+  ``awda`` drives, and ``gt-waypoints`` executes with);
 - :mod:`.gt_scene`: what ``gt-waypoints`` needs of an episode (the plan, the wrist localizer).
 """
 

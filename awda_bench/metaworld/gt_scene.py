@@ -8,7 +8,7 @@ localizer, and its actions.
               the package's scripted policy from S, 5 steps past its first success (or
               planning_steps), recording TCP, finger distance, actions (.rollout) -> Trajectory
               restore_state(task env, S)                    bit-identical to S
-    act:      primitives' (4,) command -> mocap action      (awda_bench.metaworld.sawyer)
+    act:      primitives' (4,) command -> mocap action      (SawyerInterface, as for awda)
     grasp:    gripperPOV wrist depth (128 x 128) -> localize_object, as on ManiSkill
 
 The planning rollout steps the task env itself, not :class:`~awda_bench.metaworld.env.MetaWorldEnv`
@@ -23,16 +23,9 @@ from typing import Any
 import numpy as np
 
 from awda_bench.episode import EpisodeContext
-from awda_bench.metaworld.observations import wrist_capture
 from awda_bench.metaworld.rollout import AFTER_SUCCESS_STEPS, expert_rollout
-from awda_bench.metaworld.sawyer import (
-    SAWYER_EXECUTOR,
-    SAWYER_GRASP_MINING,
-    SAWYER_LOCALIZATION,
-    mocap_action,
-    mocap_offset,
-    robot_state,
-)
+from awda_bench.metaworld.sawyer import SAWYER_GRASP_MINING
+from awda_bench.metaworld.sawyer_interface import SawyerInterface
 from awda_bench.metaworld.state import restore_state, save_state
 from awda_bench.primitives.base import RobotState
 from awda_bench.primitives.config import LocalizationConfig
@@ -56,11 +49,14 @@ def expert_trajectory(
 
 
 class MetaWorldScene:
-    """``gt-waypoints``' view of one Meta-World episode (``ctx.env`` a ``MetaWorldEnv``)."""
+    """``gt-waypoints``' view of one Meta-World episode (``ctx.env`` a ``MetaWorldEnv``): the
+    package's expert plans on the task env; executing is the Sawyer's
+    :class:`~awda_bench.metaworld.sawyer_interface.SawyerInterface`, which ``awda`` drives too."""
 
     def __init__(self, ctx: EpisodeContext) -> None:
         self.env = ctx.env
-        self._offset = mocap_offset(self.env.task_env)
+        self.robot = SawyerInterface(self.env.episode_observations(ctx.spec, ctx.extras))
+        """The Sawyer as the primitives drive it (its mocap offset measured now, at rest)."""
 
     def configure(self, config: Any) -> Any:
         """``config`` (a ``GTWaypointsConfig``) with the Sawyer's executor, mining and
@@ -77,22 +73,23 @@ class MetaWorldScene:
         blocked)."""
         return replace(
             config,
-            executor=SAWYER_EXECUTOR,
+            executor=self.robot.executor_config(config.executor),
             mining=SAWYER_GRASP_MINING,
             press_mining=None,
-            localization=replace(SAWYER_LOCALIZATION, select=config.localization.select),
+            localization=self.robot.localization_config(config.localization),
             record_truth=False,
         )
 
     def plan(self, max_steps: int) -> list[Trajectory]:
-        return [expert_trajectory(self.env.task_env, self.env.task_name, max_steps, self._offset)]
+        task_env = self.env.task_env
+        return [expert_trajectory(task_env, self.env.task_name, max_steps, self.robot.offset)]
 
     def robot_states(self) -> list[RobotState]:
-        return [robot_state(self.env.task_env)]
+        return self.robot.robot_states()
 
     def locator(self, env_index: int, config: LocalizationConfig) -> WristLocator:
-        return WristLocator(self.env, env_index=env_index, config=config, capture=wrist_capture)
+        return self.robot.locator(env_index, config)
 
     def env_actions(self, actions: np.ndarray) -> np.ndarray:
         """The primitives' ``(1, 4)`` commands as Meta-World's actions."""
-        return mocap_action(self.env.task_env, actions[0], self._offset)[None]
+        return self.robot.env_actions(actions)

@@ -12,6 +12,8 @@
                        (w, x, y, z), finger-site distance [m], the 9 arm and finger joints
 ``demo_frames(n)``     the scripted expert in the demo layout (``spec.demo_seed``), ``n`` frames
                        evenly spaced from reset to its first success (or the horizon)
+``hand_target()``      Meta-World only: the hand's mocap target [m] (the Sawyer's set-point)
+``robot_interface()``  Meta-World only: the Sawyer as the motor primitives drive it
 =====================  ===========================================================================
 
 World frame: Meta-World's (metres, z up, the table top at z = 0). The demo is played in the
@@ -29,6 +31,8 @@ from awda_bench.episode import EpisodeSpec, Proprioception, WristDepth
 from awda_bench.metaworld.demo import demo_frames
 from awda_bench.metaworld.layout import reset_to_layout
 from awda_bench.metaworld.renderer import FrameRenderer, camera_pose
+from awda_bench.metaworld.sawyer import robot_state
+from awda_bench.metaworld.sawyer_interface import SawyerInterface
 from awda_bench.suites import Suite
 
 WRIST_CAMERA = "gripperPOV"
@@ -106,14 +110,27 @@ class MetaWorldObservations:
 
     def proprio(self) -> Proprioception:
         env = self._env.task_env
-        left = np.asarray(env.data.site("leftEndEffector").xpos, dtype=np.float64)
-        right = np.asarray(env.data.site("rightEndEffector").xpos, dtype=np.float64)
+        state = robot_state(env)
         return Proprioception(
-            tcp_pos=(0.5 * (left + right)).reshape(1, 3),
+            tcp_pos=state.tcp_pos.reshape(1, 3),
             tcp_quat=np.asarray(env.data.body("hand").xquat, dtype=np.float64).reshape(1, 4),
-            gripper_opening_m=np.array([np.linalg.norm(left - right)]),
+            gripper_opening_m=np.array([state.gripper_opening_m]),
             qpos=np.asarray(env.data.qpos[:9], dtype=np.float64).reshape(1, 9),
         )
+
+    def hand_target(self) -> np.ndarray:
+        """``(1, 3)`` float64: the mocap target the hand is welded to [m] (the Sawyer's position
+        set-point, which Meta-World's action moves; not in the
+        :class:`~awda_bench.episode.Observations` protocol: the primitives' action conversion
+        reads it, :mod:`awda_bench.metaworld.sawyer_interface`)."""
+        mocap = self._env.task_env.data.mocap_pos[0]
+        return np.asarray(mocap, dtype=np.float64).reshape(1, 3)
+
+    def robot_interface(self) -> SawyerInterface:
+        """The Sawyer as the motor primitives drive it in this episode (``awda``; picked by
+        :func:`awda_bench.primitives.robot_interface.robot_interface_of`). Its mocap offset is
+        measured now: ask for it with the hand at rest, after :meth:`demo_frames`."""
+        return SawyerInterface(self)
 
     def demo_frames(self, count: int = 10) -> np.ndarray:
         cached = self._extras.get("demo_frames")

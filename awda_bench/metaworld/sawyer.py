@@ -78,10 +78,21 @@ def mocap_offset(env: Any) -> np.ndarray:
 
 def mocap_action(env: Any, action: np.ndarray, offset: np.ndarray) -> np.ndarray:
     """Meta-World's action ``(4,)`` float32 that puts the mocap where the primitives' ``action``
-    (a TCP displacement in units of :data:`STEP_M`, and the gripper command) wants the TCP."""
+    (a TCP displacement in units of :data:`STEP_M`, and the gripper command) wants the TCP
+    (:func:`lead_action` with ``env``'s TCP and mocap now)."""
+    mocap = np.asarray(env.data.mocap_pos[0], dtype=np.float64)
+    return lead_action(robot_state(env).tcp_pos, mocap, action, offset)
+
+
+def lead_action(
+    tcp: np.ndarray, mocap: np.ndarray, action: np.ndarray, offset: np.ndarray
+) -> np.ndarray:
+    """Meta-World's action ``(4,)`` float32 at TCP ``tcp`` [m] and mocap ``mocap`` [m] for the
+    primitives' ``action``: the mocap moves toward ``tcp + offset + G x action[:3] x STEP_M``
+    (in units of 1 cm, scaled into [-1, 1] keeping its direction); ``action[3]`` as is."""
     a = np.asarray(action, dtype=np.float64).reshape(4)
-    target = robot_state(env).tcp_pos + offset + TRACKING_GAIN * STEP_M * a[:3]
-    move = (target - np.asarray(env.data.mocap_pos[0], dtype=np.float64)) / STEP_M
+    target = np.asarray(tcp, dtype=np.float64) + offset + TRACKING_GAIN * STEP_M * a[:3]
+    move = (target - np.asarray(mocap, dtype=np.float64)) / STEP_M
     move = move / max(1.0, float(np.max(np.abs(move))))
     return np.array([move[0], move[1], move[2], a[3]], dtype=np.float32)
 

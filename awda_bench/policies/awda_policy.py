@@ -11,26 +11,36 @@ Per episode (SPEC §6, S1)::
 The network sees only images: the demo frames and the agent's first frame, resized with OpenCV to
 the snapshot's configured input size. Predicted attribute probabilities are thresholded at
 ``attribute_threshold`` into the flags the executor acts on.
+
+The robot the executor drives comes from the episode's observations
+(:func:`~awda_bench.primitives.robot_interface.robot_interface_of`): on the ManiSkill suites the
+``panda_awda`` agent with :class:`AWDAPolicyConfig`'s executor and localization parameters, its
+actions the primitives' commands; on Meta-World the Sawyer
+(:class:`~awda_bench.metaworld.sawyer_interface.SawyerInterface`, the object ``gt-waypoints``
+executes with there): its executor and localization parameters replace the configured ones (the
+component rule, ``--grasp-select``, kept: ``awda-centre`` too), and each command becomes the mocap
+action that leads the TCP toward it. Waypoints are in the suite's world frame (Meta-World's: z up,
+the table top at 0), as the training trajectories were recorded.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from awda_bench.data.trajectory_file import as_stored, trained_jpeg_quality
-from awda_bench.episode import EpisodeContext, Observations, observations_of
+from awda_bench.episode import EpisodeContext, observations_of
 from awda_bench.errors import CorruptFileError, UsageError
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig
-from awda_bench.primitives.base import RobotState
 from awda_bench.primitives.config import CENTRE_SUFFIX, ExecutorConfig, LocalizationConfig
 from awda_bench.primitives.executor import WaypointExecutor
-from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION, WristLocator
+from awda_bench.primitives.robot_interface import RobotInterface, robot_interface_of
+from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION
 
 
 @dataclass(frozen=True)
@@ -105,7 +115,10 @@ class AWDAPolicy:
         trunk = model.config.trunk
         self.image_size = (trunk.image_height_px, trunk.image_width_px)
         self.demo_frames = trunk.demo_frames
-        self._observations: Observations | None = None
+        self.episode_config = self.config
+        """The settings the current episode runs with (on Meta-World the Sawyer's executor and
+        localization parameters in place of the Panda's, the method's component rule kept)."""
+        self._robot: RobotInterface | None = None
         self._executor: WaypointExecutor | None = None
         self._waypoints: np.ndarray | None = None
         self.predict_s = 0.0
@@ -115,7 +128,6 @@ class AWDAPolicy:
         from awda_bench.models.predict import predict_waypoints
 
         observations = observations_of(ctx)
-        self._observations = observations
         demo = observations.demo_frames(self.demo_frames)
         check_camera(self.model.config, observations.camera())
         first = observations.first_frame()
@@ -131,22 +143,23 @@ class AWDAPolicy:
         waypoints = predicted.copy()
         waypoints[:, 3:] = (predicted[:, 3:] > self.config.attribute_threshold).astype(np.float64)
         self._waypoints = waypoints
-        locator = WristLocator(
-            None,
-            env_index=0,
-            config=self.config.localization,
-            capture=lambda _env: observations.wrist_depth(),
+        robot = robot_interface_of(observations)  # after the demo: the hand at rest, in layout
+        self._robot = robot
+        config = self.config
+        self.episode_config = replace(
+            config,
+            executor=robot.executor_config(config.executor),
+            localization=robot.localization_config(config.localization),
         )
-        self._executor = WaypointExecutor(waypoints, locator, self.config.executor)
+        locator = robot.locator(0, self.episode_config.localization)
+        self._executor = WaypointExecutor(waypoints, locator, self.episode_config.executor)
 
     def act(self, obs: Any) -> np.ndarray:
-        if self._executor is None or self._observations is None:
+        if self._executor is None or self._robot is None:
             raise RuntimeError("AWDAPolicy.act() before reset(ctx)")
-        proprio = self._observations.proprio()
-        state = RobotState(
-            tcp_pos=proprio.tcp_pos[0], gripper_opening_m=float(proprio.gripper_opening_m[0])
-        )
-        return self._executor.step(state)[None].astype(np.float32)
+        state = self._robot.robot_states()[0]
+        command = self._executor.step(state)[None]
+        return np.asarray(self._robot.env_actions(command), dtype=np.float32)
 
     @property
     def done(self) -> bool:
@@ -161,8 +174,6 @@ class AWDAPolicy:
 def awda_centre(snapshot: str | Path) -> AWDAPolicy:
     """``awda`` whose grasps take the depth component nearest the wrist image's centre (the
     reference's rule; ``awda`` follows the predicted grasp waypoint)."""
-    from dataclasses import replace
-
     policy = AWDAPolicy(
         snapshot, AWDAPolicyConfig(localization=replace(WRIST_LOCALIZATION, select="centre"))
     )

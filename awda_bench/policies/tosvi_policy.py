@@ -24,6 +24,16 @@ Frames are rendered by the harness camera (the suite's size) and area-downscaled
 input size with OpenCV, as the ``train`` loader downscales the collected frames. The network only
 sees images; it never reads simulator state.
 
+**The action is the env's own.** The network's 4-D output (clipped to [-1, 1], gripper
+binarized) goes to the env as it is, on every suite: on ManiSkill the ``panda_awda`` controller's
+TCP displacement (a fraction of 2 cm) and gripper command; on Meta-World the package's own action
+(the hand's mocap target moves ``a[:3] x 1 cm``, ``a[3] > 0`` closes), which is the 4-D
+delta-end-effector-plus-gripper space the supplementary normalizes every suite to. So a snapshot
+evaluated on Meta-World must have been trained on the actions Meta-World received (the expert's
+raw actions), not on the motor primitives' commands that ``awda`` and ``gt-waypoints`` convert
+through the Sawyer's mocap lead (:mod:`awda_bench.metaworld.sawyer`): T-OSVI has no primitives,
+and on Meta-World the supplementary's normalized space is the environment's action space itself.
+
 ``action_select`` (``run --action-select``): ``sample`` (the reference's evaluator, default),
 ``mean`` (the mixture mean) or ``mode`` (the heaviest component's mean); the AWDA paper compares
 them for T-OSVI (seed S3). ``sample`` draws from torch's global generator, which the harness seeds
