@@ -41,13 +41,32 @@ from typing import Any
 
 from awda_bench.data.config import CollectConfig
 from awda_bench.errors import AwdaError, CorruptFileError, UnknownChoiceError, UsageError
-from awda_bench.harness.paper_values import PAPER_S3_PICK_PLACE, PAPER_S4, paper_analysis_text
+from awda_bench.harness.paper_values import (
+    PAPER_S3,
+    PAPER_S3_PICK_PLACE,
+    PAPER_S4,
+    paper_analysis_text,
+)
 from awda_bench.harness.sweep import SweepConfig
 from awda_bench.primitives.config import CENTRE_SUFFIX, GRASP_SELECTS
 from awda_bench.training.columns import TRAINABLE, Column
 
-SUITES: tuple[str, ...] = ("pick_place", "mosaic")
+SUITES: tuple[str, ...] = ("pick_place", "mosaic", "metaworld", "metaworld_ml45")
 """Suites ``reproduce`` knows how to lay out."""
+
+DEFAULT_SYNTHESIZE = 200
+"""Synthesized trajectories a collection adds (``--synthesize``) where the suite has synthesis."""
+
+
+def default_synthesize(suite_name: str) -> int:
+    """``--synthesize``'s default for ``suite_name``: :data:`DEFAULT_SYNTHESIZE`, or 0 on
+    Meta-World, where trajectory synthesis is not implemented (its waypoint box is
+    pick-and-place's world frame; :func:`awda_bench.data.plan.check_metaworld_collection`)."""
+    from awda_bench.suites import load_suite
+
+    if suite_name not in SUITES:  # plan_stages refuses it in one line
+        return DEFAULT_SYNTHESIZE
+    return 0 if load_suite(suite_name).simulator == "metaworld" else DEFAULT_SYNTHESIZE
 
 
 class RunInterrupted(AwdaError):
@@ -173,7 +192,8 @@ class ReproduceConfig:
     hold_out: str | None = None
     workers: int = 2
     episodes_per_task: int = 20
-    synthesize: int = 200
+    synthesize: int | None = None
+    """Synthesized trajectories; ``None``: :func:`default_synthesize` of the suite."""
     val_episodes_per_task: int = 5
     snapshots: int = 10
     episodes: int | None = None
@@ -345,6 +365,19 @@ def _eval_tasks(suite_name: str, hold_out: str | None) -> tuple[list[int], int]:
     return [], units
 
 
+def _paper_cell(config: ReproduceConfig, key: str) -> str:
+    """The supplementary's printed cell beside ``key``'s: Table S3's pick-and-place row (or the
+    §S3 analysis), its Meta-World [all] row (``metaworld``, the reference's five held-out tasks;
+    ``metaworld_ml45`` holds out others, so it has none), or Table S4's held-out family."""
+    if config.suite == "pick_place":
+        return PAPER_S3_PICK_PLACE.get(key) or paper_analysis_text(key) or "–"
+    if config.suite == "metaworld":
+        return PAPER_S3["metaworld_all"].get(key, "–")
+    if config.suite == "mosaic":
+        return PAPER_S4.get((key, config.hold_out or ""), "–")
+    return "–"
+
+
 def _eval_stage(key: str, evaluate: SweepConfig, left: int, arch: str, detail: str) -> Stage:
     """``evaluate KEY``: ``evaluate``'s ``run`` command, ``left`` episodes to play (done at 0)."""
     estimate = left * COSTS.eval_episode_s[arch] / evaluate.workers
@@ -366,8 +399,11 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             "--suite mosaic needs --hold-out FAMILY (train on the other families, evaluate that "
             "one), e.g. --hold-out drawer"
         )
-    if config.suite == "pick_place" and config.hold_out is not None:
-        raise UsageError("--hold-out is for --suite mosaic; pick_place holds out tasks 14 and 15")
+    if config.suite != "mosaic" and config.hold_out is not None:
+        raise UsageError(
+            f"--hold-out is for --suite mosaic; {config.suite} holds out the tasks its suite file "
+            "names (pick_place: 14 and 15); drop --hold-out"
+        )
     suite = load_suite(config.suite)
     out = config.out
     data, test = out / "data" / "train", out / "data" / "test"
@@ -375,10 +411,13 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
     stages: list[Stage] = []
     from awda_bench.data.plan import split_tasks
 
-    n_train = len(split_tasks(suite, "train")) * config.episodes_per_task * 2 + config.synthesize
+    synthesize = (
+        default_synthesize(config.suite) if config.synthesize is None else config.synthesize
+    )
+    n_train = len(split_tasks(suite, "train")) * config.episodes_per_task * 2 + synthesize
     collect_train = CollectConfig(
         suite=config.suite, split="train", embodiment="both",
-        episodes_per_task=config.episodes_per_task, synthesize=config.synthesize, out=data,
+        episodes_per_task=config.episodes_per_task, synthesize=synthesize, out=data,
         workers=config.workers, progress=config.progress,
     )  # fmt: skip
     left_train = _collect_remaining(collect_train)
@@ -387,7 +426,7 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             "collect train",
             _collect_argv(collect_train),
             left_train * COSTS.collect_episode_s * 2 / config.workers,
-            _collection_done(data, "train", config.episodes_per_task, config.synthesize),
+            _collection_done(data, "train", config.episodes_per_task, synthesize),
             f"{n_train} episodes" + (f", {left_train} left" if 0 < left_train < n_train else ""),
             collect_train,
         )
@@ -443,11 +482,11 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             if not any((data / "features").glob("*.h5")):
                 # o_1 of every agent episode, the demo frames of every demonstrator and
                 # synthesized one
-                pairs = (n_train - config.synthesize) / 2
-                encode_s = COSTS.encode_frame_s * (pairs * 11 + config.synthesize * 10)
+                pairs = (n_train - synthesize) / 2
+                encode_s = COSTS.encode_frame_s * (pairs * 11 + synthesize * 10)
         elif frozen:  # T-OSVI over cached (pooled) maps: every agent frame is encoded once
             step_s = COSTS.frozen_tosvi_step_s[column.arch]
-            pairs = (n_train - config.synthesize) / 2  # counted only before the first step
+            pairs = (n_train - synthesize) / 2  # counted only before the first step
             encode_s = COSTS.encode_frame_s * pairs * (COSTS.agent_episode_steps + 10)
         steps_done = _steps_done(ckpt)
         stages.append(
@@ -722,6 +761,10 @@ PAPER_SCALE = {
     "demos_per_task": "100 per task per embodiment (reference collection)",
     "steps": "not stated for pick-and-place; snapshots every 10k steps, batch 30",
 }
+"""The reference's scale beside ours in ``reproduce.md`` (Table S2; pick-and-place's image)."""
+
+PAPER_IMAGE = {"metaworld": "224x224", "metaworld_ml45": "224x224"}
+"""Table S2's input size where it is not pick-and-place's (:data:`PAPER_SCALE`'s)."""
 
 
 def _fmt(mean: float | None, se: float | None) -> str:
@@ -764,6 +807,7 @@ def write_summary(config: ReproduceConfig) -> Path:
     report = out / "report"
     summary = json.loads((report / "summary.json").read_text())
     recipe = load_recipe(config.recipe)
+    model = recipe.for_suite(config.suite).model  # the sizes it trains this suite with
     manifest = _manifest(out / "data" / "train") or {}
     d = manifest.get("definition", {})
     counts = manifest.get("counts", {}).get("by_role", {})
@@ -788,8 +832,9 @@ def write_summary(config: ReproduceConfig) -> Path:
         "| | ours | paper |",
         "|---|---|---|",
         f"| recipe | `{recipe.name}` (sha256 {recipe.sha256[:12]}) | `paper` (Table S2) |",
-        f"| network input | {recipe.model.image_height_px}x{recipe.model.image_width_px} "
-        f"(collected at {'x'.join(map(str, d.get('image_size', [])))}) | {PAPER_SCALE['image']} |",
+        f"| network input | {model.image_height_px}x{model.image_width_px} "
+        f"(collected at {'x'.join(map(str, d.get('image_size', [])))}) | "
+        f"{PAPER_IMAGE.get(config.suite, PAPER_SCALE['image'])} |",
         f"| demos per training task | {d.get('episodes_per_task')} per embodiment; "
         f"{d.get('synthesize', 0)} synthesized; kept {kept} | {PAPER_SCALE['demos_per_task']} |",
         f"| training | {recipe.train.max_steps} steps x batch {recipe.train.batch_size}, snapshot "
@@ -807,11 +852,7 @@ def write_summary(config: ReproduceConfig) -> Path:
     ]
     for key in config.columns:
         c = cells.get(key)
-        paper = (
-            PAPER_S3_PICK_PLACE.get(key) or paper_analysis_text(key) or "–"
-            if config.suite == "pick_place"
-            else PAPER_S4.get((key, config.hold_out or ""), "–")
-        )
+        paper = _paper_cell(config, key)
         if c is None:
             lines.append(f"| {column_title(key)} (`{key}`) | not evaluated | | | {paper} |")
         else:

@@ -167,7 +167,8 @@ def test_finished_stages_are_recognized(tmp_path: Path) -> None:
         (["--suite", "mosaic"], "needs --hold-out FAMILY"),
         (["--suite", "mosaic", "--hold-out", "kitchen"], "unknown --hold-out family 'kitchen'"),
         (["--suite", "pick_place", "--hold-out", "drawer"], "is for --suite mosaic"),
-        (["--suite", "metaworld"], "unknown suite 'metaworld'"),
+        (["--suite", "metaworld", "--hold-out", "drawer"], "is for --suite mosaic"),
+        (["--suite", "metaworld_ml46"], "unknown suite 'metaworld_ml46'"),
         (["--suite", "pick_place", "--workers", "0"], "--workers must be at least 1"),
     ],
 )
@@ -179,6 +180,27 @@ def test_bad_input_is_one_line_exit_2(
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and message in err, err
     assert not out.exists()
+
+
+def test_metaworld_collects_without_synthesis_and_evaluates_the_five_held_out_tasks(
+    tmp_path: Path, capsys
+) -> None:
+    from awda_bench.reproduce import _paper_cell
+
+    out = tmp_path / "rep"
+    argv = ["reproduce", "--suite", "metaworld", "--columns", "full-1,tosvi", "--out", str(out)]
+    assert main([*argv, "--dry-run"]) == 0
+    text = capsys.readouterr().out
+    # 45 training tasks x 20 x 2 roles, no synthesized ones (not implemented on Meta-World)
+    assert "1800 episodes" in text and "50 validation episodes" in text
+    assert "10 snapshots x 20 episodes x 5 tasks" in text
+    assert not out.exists()
+    stages = {s.name: s for s in plan_stages(ReproduceConfig(suite="metaworld", out=out))}
+    collect = stages["collect train"].argv
+    assert "--synthesize" not in collect or collect[collect.index("--synthesize") + 1] == "0"
+    config = ReproduceConfig(suite="metaworld", out=out)
+    assert _paper_cell(config, "full-1") == ".48 ± .05"  # Table S3, Meta-World [all]
+    assert _paper_cell(ReproduceConfig(suite="pick_place", out=out), "full-1") == "1.0 ± .00"
 
 
 def test_columns_parse_in_the_given_order() -> None:

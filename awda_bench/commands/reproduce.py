@@ -55,7 +55,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="training demos per task and embodiment (default 20; the reference used 100)",
     )
     parser.add_argument(
-        "--synthesize", type=int, default=200, help="synthesized trajectories (default 200)"
+        "--synthesize",
+        type=int,
+        default=None,
+        help="synthesized trajectories (default 200; 0 on Meta-World, which has no synthesis)",
     )
     parser.add_argument("--snapshots", type=int, default=10, help="last N snapshots (default 10)")
     parser.add_argument(
