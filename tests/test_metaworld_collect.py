@@ -10,13 +10,13 @@ role, 64x64 frames and 32x32 wrist depth, recorded once per module with 2 worker
 from __future__ import annotations
 
 import json
-import os
 import shutil
 from pathlib import Path
 
 import h5py
 import numpy as np
 import pytest
+from metaworld_env import needs_metaworld
 
 from awda_bench.cli import main
 from awda_bench.data.collect import MANIFEST, run_collect
@@ -24,23 +24,9 @@ from awda_bench.data.config import CollectConfig
 from awda_bench.data.datasets import AwdaPairDataset, CollectedData, TosviDataset
 from awda_bench.data.plan import make_plan
 from awda_bench.errors import UsageError
-from awda_bench.runtimes import MissingEnvironmentError, worker_python
 
 PICK, REACH = 30, 43
 """pick-place-v3 and reach-v3: indices in tasks/metaworld.toml (both train tasks)."""
-
-
-def _metaworld_python() -> str | None:
-    try:
-        return worker_python("metaworld")
-    except MissingEnvironmentError:
-        return None
-
-
-needs_metaworld = pytest.mark.skipif(
-    _metaworld_python() is None and not os.environ.get("CI"),
-    reason=".venv-metaworld is missing (make it with `bash scripts/setup.sh`); under CI these run",
-)
 
 
 def tiny_config(out: Path, workers: int = 2) -> CollectConfig:

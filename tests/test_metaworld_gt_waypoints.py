@@ -15,26 +15,13 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from metaworld_env import metaworld_python, needs_metaworld
 
-from awda_bench.errors import UsageError
 from awda_bench.harness.results_store import ResultsStore
 from awda_bench.harness.sweep import SweepConfig, run_sweep
 from awda_bench.metaworld.sawyer import STEP_M, TRACKING_GAIN, mocap_action, tracking_command
-from awda_bench.runtimes import PROJECT_ROOT, worker_python
+from awda_bench.runtimes import PROJECT_ROOT
 from awda_bench.suites import load_suite
-
-
-def _metaworld_python() -> str | None:
-    try:
-        return worker_python("metaworld")
-    except UsageError:
-        return None
-
-
-needs_metaworld = pytest.mark.skipif(
-    _metaworld_python() is None and not os.environ.get("CI"),
-    reason=".venv-metaworld is missing (make it with `bash scripts/setup.sh`); under CI these run",
-)
 
 
 def _fake_env(tcp: np.ndarray, mocap: np.ndarray) -> SimpleNamespace:
@@ -108,7 +95,7 @@ print(json.dumps(result))
 
 @pytest.fixture(scope="module")
 def checks() -> dict:
-    python = _metaworld_python()
+    python = metaworld_python()
     assert python is not None
     env = {**os.environ, "PYTHONPATH": str(PROJECT_ROOT), "MUJOCO_GL": "egl"}
     out = subprocess.run(

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from metaworld_env import needs_metaworld
 
 from awda_bench.episode import EpisodeContext, EpisodeSpec, Proprioception, WristDepth
 from awda_bench.errors import UsageError
@@ -39,7 +40,6 @@ from awda_bench.policies.awda_policy import AWDAPolicy, awda_centre
 from awda_bench.primitives.config import ExecutorConfig
 from awda_bench.primitives.executor import WaypointExecutor
 from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION
-from awda_bench.runtimes import MissingEnvironmentError, worker_python
 from awda_bench.suites import SUITES_DIR, load_suite
 
 TESTS = Path(__file__).resolve().parent
@@ -49,19 +49,6 @@ MW_K = np.array([[270.0, 0.0, 112.0], [0.0, 270.0, 112.0], [0.0, 0.0, 1.0]])
 MW_E = np.array([[1.0, 0.0, 0.0, 0.1], [0.0, -1.0, 0.0, 0.6], [0.0, 0.0, -1.0, 1.2]])
 PANDA_K = np.array([[277.0, 0.0, 160.0], [0.0, 277.0, 120.0], [0.0, 0.0, 1.0]])
 """A ManiSkill-like 240 x 320 camera: a snapshot trained with it must refuse Meta-World's."""
-
-
-def _metaworld_python() -> str | None:
-    try:
-        return worker_python("metaworld")
-    except MissingEnvironmentError:
-        return None
-
-
-needs_metaworld = pytest.mark.skipif(
-    _metaworld_python() is None and not os.environ.get("CI"),
-    reason=".venv-metaworld is missing (make it with `bash scripts/setup.sh`); under CI these run",
-)
 
 
 def _trunk(head: str = "self-attention") -> TrunkConfig:

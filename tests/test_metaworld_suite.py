@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from metaworld_env import metaworld_python, needs_metaworld
 
 from awda_bench.episode import EpisodeContext, EpisodeSpec
 from awda_bench.errors import UnknownChoiceError, UsageError
@@ -24,23 +25,10 @@ from awda_bench.harness.episode_runner import run_episode
 from awda_bench.harness.results_store import ResultsStore
 from awda_bench.harness.sweep import SweepConfig, prepare_sweep, run_sweep
 from awda_bench.metaworld_tasks import ALL_TASKS, ML45_TEST, REFERENCE_HELD_OUT
-from awda_bench.runtimes import MissingEnvironmentError, worker_python
+from awda_bench.runtimes import MissingEnvironmentError
 from awda_bench.suites import SUITES_DIR, load_suite
 
 TESTS = Path(__file__).resolve().parent
-
-
-def _metaworld_python() -> str | None:
-    try:
-        return worker_python("metaworld")
-    except MissingEnvironmentError:
-        return None
-
-
-needs_metaworld = pytest.mark.skipif(
-    _metaworld_python() is None and not os.environ.get("CI"),
-    reason=".venv-metaworld is missing (make it with `bash scripts/setup.sh`); under CI these run",
-)
 
 
 def test_suite_files_hold_out_the_reference_five_and_ml45_test_set() -> None:
@@ -270,7 +258,7 @@ def test_scripted_and_random_through_the_harness(tmp_path: Path) -> None:
 
 @needs_metaworld
 def test_task_names_match_the_package() -> None:
-    python = _metaworld_python()
+    python = metaworld_python()
     assert python is not None
     code = (
         "import json; from metaworld.env_dict import ALL_V3_ENVIRONMENTS as A, ML45_V3 as M; "
