@@ -33,6 +33,10 @@ from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
 SUITES_DIR = Path(__file__).resolve().parent.parent / "tasks"
 """Where the suite definition files live (``tasks/`` at the project root)."""
 
+DIFFICULTIES = ("easy", "medium", "hard", "very_hard")
+"""Values a task's ``difficulty`` may take: the published Meta-World grouping the Meta-World suite
+files cite (Seo et al. 2022); ManiSkill suites leave it unset."""
+
 SIMULATORS = ("maniskill", "metaworld")
 """What a suite's episodes run on: the project's ManiSkill envs (in the project's environment), or
 the ``metaworld`` package (in an environment of its own, see :mod:`awda_bench.runtimes`)."""
@@ -52,6 +56,9 @@ class TaskDef:
     """ManiSkill env serving this task when it differs from the suite's (suites mixing families)."""
     variation: int | None = None
     """Value passed as ``options["task"]`` to that env; ``None`` means :attr:`index`."""
+    difficulty: str | None = None
+    """Published difficulty group (one of :data:`DIFFICULTIES`; Meta-World tasks), which Table S3's
+    [easy] / [hard] rows are built from; ``None``: none."""
 
     @property
     def reset_task(self) -> int:
@@ -158,6 +165,7 @@ def load_suite(name: str, directory: Path = SUITES_DIR) -> Suite:
                 family=str(t["family"]),
                 env_id=str(t["env_id"]) if "env_id" in t else None,
                 variation=int(t["variation"]) if "variation" in t else None,
+                difficulty=str(t["difficulty"]) if "difficulty" in t else None,
             )
             for t in raw["tasks"]
         )
@@ -191,6 +199,12 @@ def load_suite(name: str, directory: Path = SUITES_DIR) -> Suite:
         raise CorruptFileError(
             f"suite file {path}: simulator {suite.simulator!r} is not one of {list(SIMULATORS)}"
         )
+    for t in suite.tasks:
+        if t.difficulty is not None and t.difficulty not in DIFFICULTIES:
+            raise CorruptFileError(
+                f"suite file {path}: task {t.index} has difficulty {t.difficulty!r}, not one of "
+                f"{list(DIFFICULTIES)}"
+            )
     if suite.name != name:
         raise CorruptFileError(
             f"suite file {path} declares name {suite.name!r}; rename one of them"

@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import os
 import subprocess
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -20,7 +21,7 @@ import pytest
 from metaworld_env import metaworld_python, needs_metaworld
 
 from awda_bench.episode import EpisodeContext, EpisodeSpec
-from awda_bench.errors import UnknownChoiceError, UsageError
+from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
 from awda_bench.harness.episode_runner import run_episode
 from awda_bench.harness.results_store import ResultsStore
 from awda_bench.harness.sweep import SweepConfig, prepare_sweep, run_sweep
@@ -49,6 +50,19 @@ def test_suite_files_hold_out_the_reference_five_and_ml45_test_set() -> None:
     assert sorted(t.name for t in ml45.eval_tasks) == sorted(ML45_TEST)
     assert [t.name for t in ml45.tasks] == list(ALL_TASKS)
     assert ml45.horizon_steps == suite.horizon_steps
+
+
+def test_every_metaworld_task_carries_its_published_difficulty(tmp_path: Path) -> None:
+    # the grouping both suite files cite: 28 easy, 11 medium, 6 hard, 5 very hard
+    for name in ("metaworld", "metaworld_ml45"):
+        counts = Counter(t.difficulty for t in load_suite(name).tasks)
+        assert counts == {"easy": 28, "medium": 11, "hard": 6, "very_hard": 5}
+    held_out = {t.name: t.difficulty for t in load_suite("metaworld").eval_tasks}
+    assert held_out["pick-place-wall-v3"] == "very_hard" and held_out["sweep-into-v3"] == "medium"
+    text = (SUITES_DIR / "metaworld.toml").read_text().replace('"very_hard"', '"brutal"', 1)
+    (tmp_path / "metaworld.toml").write_text(text)
+    with pytest.raises(CorruptFileError, match="difficulty 'brutal', not one of"):
+        load_suite("metaworld", tmp_path)
 
 
 def test_a_bad_task_name_is_one_line_naming_the_valid_ones(tmp_path: Path) -> None:

@@ -421,3 +421,35 @@ def test_the_s3_analysis_rows_read_reached_and_grasped_beside_the_papers_reachin
     # the analysis is pick-and-place's: an entry under another suite is refused in one line
     with pytest.raises(UsageError, match="pick-and-place analysis"):
         load_index(write_index(reports, '[mosaic]\ntosvi-mode = { source = "." }\n'))
+
+
+def test_the_metaworld_rows_group_the_held_out_tasks_by_their_published_difficulty(
+    reports: Path,
+) -> None:
+    # one snapshot of 4 episodes per held-out task: easy = button-press, door-unlock, window-open;
+    # hard = sweep-into (medium) and pick-place-wall (very hard), as tasks/metaworld.toml says
+    counts = {
+        "button_press": (4, 4), "door_unlock": (3, 4), "window_open": (2, 4),
+        "sweep_into": (1, 4), "pick_place_wall": (0, 4),
+    }  # fmt: skip
+    write_source(
+        reports / "learned" / "mw", "metaworld", "full-1", [(10, 20)], families=counts, grasp=None
+    )
+    index = reports / "results_sources.toml"
+    index.write_text(index.read_text() + '\n[metaworld]\nfull-1 = { source = "learned/mw" }\n')
+    page = build_results_page(index)
+    row = page.s3_metaworld.loc["Full-1 (`full-1`)"]
+    # [easy] (1 + 0.75 + 0.5) / 3; SE = sqrt(sum of the tasks' binomial SE^2) / 3
+    se_easy = np.sqrt(sum(p * (1 - p) / 4 for p in (1.0, 0.75, 0.5))) / 3
+    assert row["ours: Meta-World [easy]"] == f"0.75 ± {se_easy:.2f}"
+    se_hard = np.sqrt(sum(p * (1 - p) / 4 for p in (0.25, 0.0))) / 2
+    assert row["ours: Meta-World [hard]"] == f"0.12 ± {se_hard:.2f}"
+    assert row["ours: Meta-World [all]"].startswith("0.50 ± ")
+    assert row["paper: Meta-World [all]"] == ".48 ± .05"  # the paper's, in its own column
+    assert "[learned/mw/](learned/mw/) `full-1`" in row["source"]
+    tasks = page.s3_metaworld_tasks
+    assert tasks.loc["pick-place-wall-v3", "difficulty"] == "very_hard"
+    assert tasks.loc["window-open-v3", "Full-1 (`full-1`)"] == "0.50 ± 0.25†"
+    tosvi = page.s3_metaworld.loc["T-OSVI [1] (`tosvi`)"]
+    assert (tosvi["ours: Meta-World [all]"], tosvi["note"]) == (NOT_RUN, NOT_TRAINED)
+    assert "[hard] = medium, hard, very_hard" in page.markdown()

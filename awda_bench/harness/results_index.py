@@ -30,7 +30,7 @@ from awda_bench.harness.paper_values import NO_COUNTERPART, S3_ANALYSIS_COLUMNS,
 INDEX_NAME = "results_sources.toml"
 """The index's file name (in ``reports/``)."""
 
-SUITES: tuple[str, ...] = ("pick_place", "mosaic")
+SUITES: tuple[str, ...] = ("pick_place", "mosaic", "metaworld")
 """Suites the page has tables for."""
 
 REFERENCE_KEYS: tuple[str, ...] = ("scripted", "gt-waypoints", "gt-waypoints-centre", "random")

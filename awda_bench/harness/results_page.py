@@ -27,7 +27,7 @@ import pandas as pd
 
 from awda_bench.errors import CorruptFileError, UsageError
 from awda_bench.harness import bootstrap_ci, tables
-from awda_bench.harness.aggregate import ALL, S4_FAMILIES, Cell
+from awda_bench.harness.aggregate import ALL, S4_FAMILIES, Cell, family_key
 from awda_bench.harness.methods import get_method
 from awda_bench.harness.paper_values import (
     NO_COUNTERPART,
@@ -37,6 +37,7 @@ from awda_bench.harness.paper_values import (
     PAPER_S4_MOSAIC,
     S3_ANALYSIS_COLUMNS,
     S3_COLUMNS,
+    S3_DIFFICULTY_GROUPS,
     S3_ROWS,
     S4_NOT_LEGIBLE,
 )
@@ -49,6 +50,7 @@ from awda_bench.harness.results_index import (
     SourceEntry,
     load_index,
 )
+from awda_bench.suites import TaskDef, load_suite
 
 PAGE_NAME = "RESULTS.md"
 """The page's file name, written beside the index."""
@@ -65,13 +67,10 @@ NOT_RUN = "not run"
 NOT_TRAINED = "not trained yet"
 """Why a trainable column has no source."""
 
-METAWORLD_NOTE = (
-    "not run: the Meta-World suites play scripted and gt-waypoints, but collect and train do not "
-    "take them yet (issue 28)"
-)
-"""Why the Meta-World rows of Table S3 are empty on our side."""
+METAWORLD_SUITE = "metaworld"
+"""The suite behind Table S3's Meta-World rows (the reference's five held-out tasks)."""
 
-SUITE_TITLES = {"pick_place": "Pick-and-place", "mosaic": "MOSAIC"}
+SUITE_TITLES = {"pick_place": "Pick-and-place", "mosaic": "MOSAIC", METAWORLD_SUITE: "Meta-World"}
 """Suite display names."""
 
 OURS = "ours (mean ± SE)"
@@ -248,9 +247,10 @@ def source_cell(entry: SourceEntry, report: ReportDir, group: str, where: str) -
     )
 
 
-def mean_over_families(cells: Sequence[PageCell]) -> PageCell:
+def mean_over_families(cells: Sequence[PageCell], unit: str = "families") -> PageCell:
     """Table S4's All: the mean over families of their cells, SE = sqrt(sum of SE^2) / #families
-    (families evaluated on separate episodes), CI stratified by family and snapshot."""
+    (families evaluated on separate episodes), CI stratified by family and snapshot. Table S3's
+    Meta-World rows are the same mean over held-out tasks (``unit`` names them in the size)."""
     if any(c.mean is None or c.se is None for c in cells):
         return PageCell(None, None, False, 0, "", None, "no ok episode", (), None)
     means = [c.mean for c in cells if c.mean is not None]
@@ -270,7 +270,7 @@ def mean_over_families(cells: Sequence[PageCell]) -> PageCell:
         se=se,
         binomial=False,
         errors=sum(c.errors for c in cells),
-        size=f"{len(cells)} families × {sizes.pop()}" if len(sizes) == 1 else "mixed",
+        size=f"{len(cells)} {unit} × {sizes.pop()}" if len(sizes) == 1 else "mixed",
         ci=ci,
         ci_note=ci_note,
         entries=entries,
@@ -341,6 +341,8 @@ class ResultsPage:
     """Success metric of every cell."""
     s3_pick_place: pd.DataFrame
     s3_metaworld: pd.DataFrame
+    s3_metaworld_tasks: pd.DataFrame
+    """Each held-out Meta-World task's cell, per column with a source."""
     s3_analysis: pd.DataFrame
     """The supplementary's §S3 analysis: T-OSVI with the mean / mode action, without a stack."""
     s4: pd.DataFrame
@@ -382,7 +384,17 @@ class ResultsPage:
             tables.to_markdown(self.s3_pick_place),
             "### Meta-World",
             "",
+            "Suite `metaworld` (the reference's five held-out tasks). The supplementary prints "
+            "[easy] and [hard] rows without naming their tasks; ours group the held-out tasks by "
+            "the published difficulty their suite file cites (Seo et al. 2022): [easy] = "
+            + ", ".join(S3_DIFFICULTY_GROUPS["metaworld_easy"])
+            + "; [hard] = "
+            + ", ".join(S3_DIFFICULTY_GROUPS["metaworld_hard"])
+            + ". Each row is the mean over its tasks' cells (SE = sqrt of the summed squared SEs "
+            "/ tasks, as Table S4's All); the tasks' own cells are below the table.",
+            "",
             tables.to_markdown(self.s3_metaworld),
+            tables.to_markdown(self.s3_metaworld_tasks),
             "### §S3 analysis: T-OSVI's action selection and frame-stack (pick-and-place)",
             "",
             'The supplementary (§S3, "DAgger problem continued") evaluates the T-OSVI baseline '
@@ -556,14 +568,72 @@ class _Builder:
         columns = [OURS, CI, SIZE, PAPER, SOURCE, NOTE]
         return pd.DataFrame(rows, index=pd.Index(index, name="column"), columns=columns)
 
-    def s3_metaworld(self) -> pd.DataFrame:
-        rows = [
-            {OURS: NOT_RUN, **{f"{PAPER}: {t}": PAPER_S3[r][key] for r, t in S3_ROWS[1:]}}
-            | {NOTE: METAWORLD_NOTE}
-            for key, _ in S3_COLUMNS
+    def task_cells(self, suite: str, column: str) -> list[tuple[TaskDef, PageCell | str]]:
+        """Each held-out task of ``suite`` (a suite whose tasks are their own families, as
+        Meta-World's) with ``column``'s cell."""
+        return [
+            (task, self.cell(suite, column, family_key(task.family)))
+            for task in load_suite(suite).eval_tasks
         ]
-        index = pd.Index([f"{title} (`{key}`)" for key, title in S3_COLUMNS], name="column")
-        return pd.DataFrame(rows, index=index)
+
+    def difficulty_cells(self, suite: str, column: str) -> dict[str, PageCell | str]:
+        """Table S3's Meta-World rows (:data:`S3_DIFFICULTY_GROUPS`) for ``column``: the mean over
+        the held-out tasks of each row's difficulties, or why there is none."""
+        tasks = self.task_cells(suite, column)
+        rows: dict[str, PageCell | str] = {}
+        for row, groups in S3_DIFFICULTY_GROUPS.items():
+            members = [(t, c) for t, c in tasks if t.difficulty in groups]
+            missing = [c for _, c in members if isinstance(c, str)]
+            if not members:
+                rows[row] = "no held-out task of this difficulty"
+            elif missing:
+                rows[row] = missing[0]
+            else:
+                rows[row] = mean_over_families(
+                    [c for _, c in members if isinstance(c, PageCell)], "tasks"
+                )
+        return rows
+
+    def s3_metaworld(self) -> pd.DataFrame:
+        rows, index = [], []
+        for key, title in S3_COLUMNS:
+            cells = self.difficulty_cells(METAWORLD_SUITE, key)
+            found = [c for c in cells.values() if isinstance(c, PageCell)]
+            row: dict[str, str] = {}
+            for r, t in S3_ROWS[1:]:
+                cell = cells[r]
+                row[f"ours: {t}"] = cell.ours() if isinstance(cell, PageCell) else NOT_RUN
+            for r, t in S3_ROWS[1:]:
+                row[f"{PAPER}: {t}"] = PAPER_S3[r][key]
+            all_cell = cells["metaworld_all"]
+            row[f"{CI} [all]"] = all_cell.ci_text() if isinstance(all_cell, PageCell) else "–"
+            row[SOURCE] = _sources(found[0]) if found else "–"
+            why = next((c for c in cells.values() if isinstance(c, str)), "")
+            row[NOTE] = "; ".join(n for n in ((_notes(found[0]) if found else ""), why) if n)
+            rows.append(row)
+            index.append(f"{title} (`{key}`)")
+        return pd.DataFrame(rows, index=pd.Index(index, name="column"))
+
+    def s3_metaworld_tasks(self) -> pd.DataFrame:
+        keys = [k for k, _ in S3_COLUMNS] + list(REFERENCE_KEYS)
+        present = [k for k in keys if self.find(METAWORLD_SUITE, k, None) is not None]
+        titles = dict(S3_COLUMNS)
+        columns = [f"{titles.get(k, k)} (`{k}`)" for k in present]
+        rows, index = [], []
+        for task in load_suite(METAWORLD_SUITE).eval_tasks:
+            row = {"difficulty": task.difficulty or "–"}
+            for key, name in zip(present, columns, strict=True):
+                cell = self.cell(METAWORLD_SUITE, key, family_key(task.family))
+                row[name] = cell.ours() if isinstance(cell, PageCell) else NOT_RUN
+            rows.append(row)
+            index.append(task.name)
+        if not present:
+            rows = [{"difficulty": "–", NOTE: "no Meta-World source in the index yet"}]
+            index = ["–"]
+            columns = [NOTE]
+        return pd.DataFrame(
+            rows, index=pd.Index(index, name="held-out task"), columns=["difficulty", *columns]
+        )
 
     def s3_analysis(self) -> pd.DataFrame:
         rows, index = [], []
@@ -632,11 +702,14 @@ class _Builder:
         for suite in SUITES:
             for key in REFERENCE_KEYS:
                 description = get_method(key).description
-                cells: list[tuple[str, PageCell | str]] = (
-                    [("–", self.cell(suite, key, ALL))]
-                    if suite == "pick_place"
-                    else self.family_cells(suite, key)
-                )
+                cells: list[tuple[str, PageCell | str]]
+                if suite == "pick_place":
+                    cells = [("–", self.cell(suite, key, ALL))]
+                elif suite == METAWORLD_SUITE:
+                    tasks = [(t.name, c) for t, c in self.task_cells(suite, key)]
+                    cells = [*tasks, ("All", self.cell(suite, key, ALL))]
+                else:
+                    cells = self.family_cells(suite, key)
                 if all(isinstance(c, str) for _, c in cells):
                     cells = [("–", "no source in the index (not evaluated yet)")]
                 for group, cell in cells:
@@ -714,6 +787,7 @@ def build_results_page(index: Path) -> ResultsPage:
         metric=builder.metric,
         s3_pick_place=builder.s3_pick_place(),
         s3_metaworld=builder.s3_metaworld(),
+        s3_metaworld_tasks=builder.s3_metaworld_tasks(),
         s3_analysis=builder.s3_analysis(),
         s4=builder.s4(),
         reference=builder.reference(),
