@@ -13,6 +13,11 @@
         "demo_trajectory" (P, 3 + k)          the same of d (its grasp labels the identification
                                               loss, :mod:`awda_bench.models.identification_loss`)
         "head"        ()  int64               0
+        "camera"      ()  int64               the index of a's third-person camera among
+                                              ``cameras`` (the distinct cameras of the pairs'
+                                              agents, in order of first appearance, unless the
+                                              caller lists them): MOSAIC films door and drawer
+                                              from one side, its other families from another
     synthesized (head 1): each synthesized episode paired with itself (demo = its own frames)
 
 Pairs never cross tasks (agent and demonstrator scenes of one task differ: their seeds are hashed
@@ -37,7 +42,7 @@ from __future__ import annotations
 
 import copy
 import os
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -50,6 +55,7 @@ from awda_bench.data.collect import MANIFEST
 from awda_bench.data.config import ROLE_AGENT, ROLE_DEMONSTRATOR, ROLE_SYNTHESIZED
 from awda_bench.data.trajectory_file import decode_jpeg, load_unit_json
 from awda_bench.errors import CorruptFileError, UsageError
+from awda_bench.models.agent_cameras import CameraMatrices, camera_index
 
 
 @dataclass(frozen=True)
@@ -275,6 +281,7 @@ class AwdaPairDataset:
         selection: Selection | None = None,
         include_synthesized: bool = True,
         allow_test: bool = False,
+        cameras: Sequence[CameraMatrices] | None = None,
     ) -> None:
         _check_split(data, allow_test)
         if demo_frames < 2 or trajectory_points < 2:
@@ -301,6 +308,32 @@ class AwdaPairDataset:
                 f"no AWDA pairs in {data.root} for this selection (needs agent and demonstrator "
                 "episodes of the same task, or synthesized ones)"
             )
+        filmed: dict[tuple[str, str], CameraMatrices] = {}
+        for agent, _, _ in self.pairs:
+            filmed.setdefault((str(agent.file), agent.traj), data.camera(agent))
+        self._filmed = [filmed[(str(a.file), a.traj)] for a, _, _ in self.pairs]
+        """Each pair's agent camera (demonstrator and agent share the scene's)."""
+        own: list[CameraMatrices] = []
+        for camera in filmed.values():
+            if camera_index(own, camera) is None:
+                own.append(camera)
+        self.cameras: list[CameraMatrices] = []
+        """The cameras ``"camera"`` indexes (:meth:`index_cameras`)."""
+        self.pair_camera: list[int] = []
+        """Each pair's ``"camera"``."""
+        self.index_cameras(own if cameras is None else cameras)
+
+    def index_cameras(self, cameras: Sequence[CameraMatrices]) -> None:
+        """Index every pair's camera among ``cameras`` (a list that holds this dataset's and
+        perhaps more: a training set's and its validation set's together)."""
+        indices = [camera_index(cameras, c) for c in self._filmed]
+        if any(i is None for i in indices):
+            raise UsageError(
+                f"an episode of {self.data.root} was filmed by a camera not among the {len(cameras)} "
+                "listed; list every camera the pairs were filmed with"
+            )
+        self.cameras = list(cameras)
+        self.pair_camera = [int(i) for i in indices if i is not None]
 
     def __len__(self) -> int:
         return len(self.pairs)
@@ -324,6 +357,7 @@ class AwdaPairDataset:
             "trajectory": torch.from_numpy(trajectory),
             "demo_trajectory": torch.from_numpy(self.trajectory(demo)),
             "head": torch.tensor(head, dtype=torch.int64),
+            "camera": torch.tensor(self.pair_camera[index], dtype=torch.int64),
         }
 
 

@@ -10,6 +10,10 @@ Batch format (what a dataset's samples stack into; images RGB float in [0, 1], c
     "demo_trajectory": (B, T, 3 + k)  the demo's own TCP path and attributes, as "trajectory";
                                    read only by the identification loss (``demo-pointer`` with
                                    ``identification_weight > 0``)
+    "camera":      (B,) int64      optional: the index of the agent camera (``config.camera_*``)
+                                   each sample was filmed with; absent: the first. The cell heads
+                                   vote on its rays, and the identification loss projects through
+                                   it (demonstrator and agent of a pair share the scene camera)
 
 With a frozen backbone, training batches carry its cached feature maps instead of the images:
 ``"demo_features" (B, demo_frames, C, h, w)`` and ``"first_frame_features" (B, C, h, w)``.
@@ -28,6 +32,7 @@ import torch
 from torch import nn
 
 from awda_bench.errors import UsageError
+from awda_bench.models.agent_cameras import config_ray_cameras
 from awda_bench.models.cell_readout import CellHeadShape
 from awda_bench.models.config import CELL_HEADS, AwdaConfig
 from awda_bench.models.demo_pointer import DemoPointer, PointerOutput
@@ -42,15 +47,6 @@ if TYPE_CHECKING:
 
 HEAD_NAMES: tuple[str, ...] = ("task", "synthesized")
 """Head index -> name: 0 task-driven data, 1 trajectory synthesis."""
-
-
-def _camera(config: AwdaConfig) -> tuple[torch.Tensor, torch.Tensor, tuple[int, int]] | None:
-    if not config.camera_intrinsic:
-        return None
-    intrinsic = torch.tensor(config.camera_intrinsic, dtype=torch.float64).view(3, 3)
-    extrinsic = torch.tensor(config.camera_extrinsic, dtype=torch.float64).view(3, 4)
-    height, width = config.camera_size
-    return intrinsic, extrinsic, (int(height), int(width))
 
 
 class AwdaNet(nn.Module):
@@ -76,7 +72,7 @@ class AwdaNet(nn.Module):
                 waypoints=config.total_waypoints,
                 waypoint_dim=config.waypoint_dim,
                 num_heads=config.num_heads,
-                camera=_camera(config),
+                cameras=config_ray_cameras(config),
             )
             self.grid = shape.grid
             if trunk.head == "demo-pointer":
@@ -100,10 +96,15 @@ class AwdaNet(nn.Module):
         )
 
     def forward(
-        self, demo: torch.Tensor, first_frame: torch.Tensor, head: torch.Tensor
+        self,
+        demo: torch.Tensor,
+        first_frame: torch.Tensor,
+        head: torch.Tensor,
+        camera: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """``demo (B, Td, 3, H, W)``, ``first_frame (B, 3, H, W)``, ``head (B,)`` ->
-        raw waypoints ``(B, 15, 3 + k)`` (xyz [m], attribute logits), sets flat in order 1..5."""
+        """``demo (B, Td, 3, H, W)``, ``first_frame (B, 3, H, W)``, ``head (B,)`` (and
+        ``camera (B,)``, each sample's camera index; ``None``: the first) -> raw waypoints
+        ``(B, 15, 3 + k)`` (xyz [m], attribute logits), sets flat in order 1..5."""
         cfg = self.config
         if demo.dim() != 5 or first_frame.dim() != 4 or demo.shape[1] != cfg.trunk.demo_frames:
             raise UsageError(
@@ -118,10 +119,26 @@ class AwdaNet(nn.Module):
             )
         frames = torch.cat((demo, first_frame.unsqueeze(1)), dim=1)
         features = self.trunk.frame_features(frames)
-        return self.forward_features(features[:, :-1], features[:, -1], head)
+        return self.forward_features(features[:, :-1], features[:, -1], head, camera)
+
+    def camera_indices(self, camera: torch.Tensor | None, b: int) -> torch.Tensor | None:
+        """``camera`` checked against the config's cameras (``None`` stays ``None``)."""
+        if camera is None:
+            return None
+        n = max(self.config.num_cameras, 1)
+        if camera.shape != (b,) or int(camera.min()) < 0 or int(camera.max()) >= n:
+            raise UsageError(
+                f"camera indices must be shape ({b},) in [0, {n}) (the config lists {n} "
+                f"camera(s)); got {camera.tolist()}"
+            )
+        return camera.long()
 
     def forward_features(
-        self, demo: torch.Tensor, first_frame: torch.Tensor, head: torch.Tensor
+        self,
+        demo: torch.Tensor,
+        first_frame: torch.Tensor,
+        head: torch.Tensor,
+        camera: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """:meth:`forward` from backbone feature maps: ``demo (B, Td, C, h, w)``,
         ``first_frame (B, C, h, w)`` (a frozen backbone's cached features, or the backbone's
@@ -133,7 +150,7 @@ class AwdaNet(nn.Module):
                 f"head indices must be shape ({b},) in [0, {cfg.num_heads}); got {head.tolist()}"
             )
         if self.scene_head is not None:
-            return self.scene_head(demo, first_frame, head.long())
+            return self.scene_head(demo, first_frame, head.long(), self.camera_indices(camera, b))
         frames = torch.cat((demo, first_frame.unsqueeze(1)), dim=1)
         features = self.trunk.temporal(frames)[:, -1]  # o_1 is the last time step
         all_heads = torch.stack([h(features) for h in self.heads], dim=1)  # (B, heads, out)
@@ -146,6 +163,7 @@ class AwdaNet(nn.Module):
         """The multi-waypoint Soft-DTW loss of a batch (format in the module docstring)."""
         cfg = self.config
         pointed: PointerOutput | None = None
+        camera = self.camera_indices(batch.get("camera"), len(batch["trajectory"]))
         if cfg.identification_weight > 0.0 and isinstance(self.scene_head, DemoPointer):
             if "demo_features" in batch:
                 demo, first = batch["demo_features"], batch["first_frame_features"]
@@ -153,14 +171,14 @@ class AwdaNet(nn.Module):
                 frames = torch.cat((batch["demo"], batch["first_frame"].unsqueeze(1)), dim=1)
                 features = self.trunk.frame_features(frames)
                 demo, first = features[:, :-1], features[:, -1]
-            pointed = self.scene_head.pointer(demo, first, batch["head"].long())
+            pointed = self.scene_head.pointer(demo, first, batch["head"].long(), camera)
             waypoints = pointed.waypoints
         elif "demo_features" in batch:  # a frozen backbone's cached features
             waypoints = self.forward_features(
-                batch["demo_features"], batch["first_frame_features"], batch["head"]
+                batch["demo_features"], batch["first_frame_features"], batch["head"], camera
             )
         else:
-            waypoints = self(batch["demo"], batch["first_frame"], batch["head"])
+            waypoints = self(batch["demo"], batch["first_frame"], batch["head"], camera)
         loss, per_set = multi_waypoint_sdtw_loss(
             waypoints,
             batch["trajectory"],
@@ -171,13 +189,12 @@ class AwdaNet(nn.Module):
         )
         info = {f"sdtw_set{j + 1}": float(v) for j, v in enumerate(per_set.detach())}
         if pointed is not None:
-            camera = _camera(cfg)
-            assert camera is not None  # AwdaConfig checks it
             found, found_info = identification_loss(
                 pointed.moved_logits,
                 pointed.object_logits,
                 batch["demo_trajectory"],
                 batch["trajectory"],
+                config_ray_cameras(cfg),  # AwdaConfig checks there is one
                 camera,
                 self.grid,
             )

@@ -7,9 +7,10 @@ cells, per waypoint head::
 
     p_j = softmax over cells of  w_j . x(cell) [+ a_j prior(cell)]   (where waypoint j is)
     v_j(cell) = MLP_j([x(cell), cell x, y])  read as an attributed point (3 + k):
-        with a camera:  the point at height z_j + dz(cell) on the camera ray through the cell's
-                        centre, moved by (dx, dy); |dz|, |dx|, |dy| <= 5 cm; z_j a parameter per
-                        waypoint, the MLP gives dz, dx, dy and attributes
+        with cameras:   the point at height z_j + dz(cell) on the ray through the cell's centre
+                        of the camera the sample was filmed with (its index, ``camera``), moved
+                        by (dx, dy); |dz|, |dx|, |dy| <= 5 cm; z_j a parameter per waypoint, the
+                        MLP gives dz, dx, dy and attributes
         without:        the MLP gives xyz and attributes
     waypoint_j = sum over cells of p_j(cell) v_j(cell)
 
@@ -22,6 +23,7 @@ coordinates and mapped them to the world with the camera matrix.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 from torch import nn
@@ -78,8 +80,9 @@ class CellHeadShape:
     """3 + k."""
     num_heads: int
     """Waypoint heads (task-driven, synthesized)."""
-    camera: Camera | None = None
-    """The agent camera, for ray votes; ``None``: free xyz votes."""
+    cameras: tuple[Camera, ...] = ()
+    """The agent cameras, for ray votes (a sample names its own by index); empty: free xyz
+    votes."""
 
 
 class CellReadout(nn.Module):
@@ -89,7 +92,7 @@ class CellReadout(nn.Module):
         """``prior``: ``forward`` takes a logit per cell that every waypoint adds to its own,
         scaled by a weight ``a_j`` learned per head and waypoint, starting at 0."""
         super().__init__()
-        dim, hidden, camera = shape.dim, shape.hidden, shape.camera
+        dim, hidden, cameras = shape.dim, shape.hidden, shape.cameras
         waypoints, waypoint_dim, num_heads = shape.waypoints, shape.waypoint_dim, shape.num_heads
         h, w = grid = shape.grid
         self.waypoints, self.waypoint_dim, self.num_heads = waypoints, waypoint_dim, num_heads
@@ -97,11 +100,11 @@ class CellReadout(nn.Module):
             torch.linspace(-1.0, 1.0, h), torch.linspace(-1.0, 1.0, w), indexing="ij"
         )
         self.register_buffer("cell_xy", torch.stack((xs, ys), dim=-1).reshape(h * w, 2))
-        self.rays = camera is not None
-        if camera is not None:
-            origin, directions = cell_rays(camera[0].double(), camera[1].double(), camera[2], grid)
-            self.register_buffer("ray_origin", origin.float())
-            self.register_buffer("ray_direction", directions.float())
+        self.rays = bool(cameras)
+        if cameras:
+            rays = [cell_rays(k.double(), e.double(), size, grid) for k, e, size in cameras]
+            self.register_buffer("ray_origin", torch.stack([o for o, _ in rays]).float())
+            self.register_buffer("ray_direction", torch.stack([d for _, d in rays]).float())
             self.height = nn.Parameter(torch.full((num_heads, waypoints), INITIAL_HEIGHT_M))
         self.where_logits = nn.ModuleList(nn.Linear(dim, waypoints) for _ in range(num_heads))
         self.prior_weight = nn.Parameter(torch.zeros(num_heads, waypoints)) if prior else None
@@ -114,18 +117,30 @@ class CellReadout(nn.Module):
 
     cell_xy: torch.Tensor
     ray_origin: torch.Tensor
+    """``(cameras, 3)``: each camera's centre (world frame)."""
     ray_direction: torch.Tensor
+    """``(cameras, h*w, 3)``: each camera's unit rays through the cell centres."""
 
-    def _ray_points(self, votes: torch.Tensor, head: int) -> torch.Tensor:
-        """Raw votes ``(..., L, N, 3 + k)`` read as (z, dx, dy, attributes) -> attributed points:
-        a waypoint's height is its own parameter plus at most ``MAX_OFFSET_M`` from the cell, so
-        that votes start ordered along the image (a free height per cell would scatter them)."""
+    def _load_from_state_dict(self, state_dict: dict[str, Any], prefix: str, *args: Any) -> None:
+        # snapshots from before cameras were listed hold one camera's rays without the axis
+        for name, dims in (("ray_origin", 1), ("ray_direction", 2)):
+            key = prefix + name
+            if key in state_dict and state_dict[key].dim() == dims:
+                state_dict[key] = state_dict[key].unsqueeze(0)
+        super()._load_from_state_dict(state_dict, prefix, *args)
+
+    def _ray_points(self, votes: torch.Tensor, head: int, camera: torch.Tensor) -> torch.Tensor:
+        """Raw votes ``(b, L, N, 3 + k)`` read as (z, dx, dy, attributes) on the rays of each
+        sample's ``camera`` ``(b,)`` -> attributed points: a waypoint's height is its own
+        parameter plus at most ``MAX_OFFSET_M`` from the cell, so that votes start ordered along
+        the image (a free height per cell would scatter them)."""
         height = self.height[head].view(-1, 1)  # (N, 1)
         z = height + MAX_OFFSET_M * torch.tanh(votes[..., :1])
         offset, attributes = votes[..., 1:3], votes[..., 3:]
-        direction = self.ray_direction[:, None, :]  # (L, 1, 3)
-        reach = (z - self.ray_origin[2]) / direction[..., 2:3]  # distance along the ray
-        point = self.ray_origin + reach * direction
+        direction = self.ray_direction[camera][:, :, None, :]  # (b, L, 1, 3)
+        origin = self.ray_origin[camera][:, None, None, :]  # (b, 1, 1, 3)
+        reach = (z - origin[..., 2:3]) / direction[..., 2:3]  # distance along the ray
+        point = origin + reach * direction
         shift = MAX_OFFSET_M * torch.tanh(offset)
         point = torch.cat((point[..., :2] + shift, point[..., 2:]), dim=-1)
         return torch.cat((point, attributes), dim=-1)
@@ -141,9 +156,16 @@ class CellReadout(nn.Module):
         return torch.softmax(logits, dim=1)
 
     def forward(
-        self, x: torch.Tensor, head: torch.Tensor, prior: torch.Tensor | None = None
+        self,
+        x: torch.Tensor,
+        head: torch.Tensor,
+        prior: torch.Tensor | None = None,
+        camera: torch.Tensor | None = None,
     ) -> torch.Tensor:
+        """``camera`` ``(B,)``: each sample's camera index (``None``: all the first)."""
         b, cells = x.shape[:2]
+        if camera is None:
+            camera = torch.zeros(b, dtype=torch.long, device=x.device)
         values_in = torch.cat((x, self.cell_xy.expand(b, -1, -1)), dim=-1)
         out = x.new_empty(b, self.waypoints, self.waypoint_dim)
         for i in range(self.num_heads):
@@ -153,6 +175,6 @@ class CellReadout(nn.Module):
             where = self.where(x[rows], i, None if prior is None else prior[rows])  # (b_i, L, N)
             votes = self.vote[i](values_in[rows]).view(-1, cells, self.waypoints, self.waypoint_dim)
             if self.rays:
-                votes = self._ray_points(votes, i)
+                votes = self._ray_points(votes, i, camera[rows])
             out[rows] = torch.einsum("bln,blnk->bnk", where, votes)
         return out

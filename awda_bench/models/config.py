@@ -164,26 +164,31 @@ class AwdaConfig:
     reference. Needs the ``demo-pointer`` head and a camera (the labels are trajectory points
     projected onto the cells)."""
     camera_intrinsic: tuple[float, ...] = ()
-    """The agent camera's 3x3 ``intrinsic_cv``, row-major (9 numbers), or empty. With a camera the
-    cell heads (``demo-to-scene``, ``demo-pointer``) vote points on the rays through o_1's cells (the reference mapped
-    image-plane predictions to the world through its camera matrix); without one its votes are
-    free xyz."""
+    """The agent cameras' 3x3 ``intrinsic_cv``, row-major, one after the other (9 numbers per
+    camera), or empty. With cameras the cell heads (``demo-to-scene``, ``demo-pointer``) vote
+    points on the rays through o_1's cells (the reference mapped image-plane predictions to the
+    world through its camera matrix); without, their votes are free xyz. A suite whose scenes are
+    filmed from more than one place (MOSAIC: door and drawer from one side, the other families
+    from another) has one camera per place, and every sample names its own (batch ``"camera"``:
+    the index, :mod:`awda_bench.models.awda_net`)."""
     camera_extrinsic: tuple[float, ...] = ()
-    """The agent camera's 3x4 world-to-camera ``extrinsic_cv``, row-major (12 numbers), or empty."""
+    """The agent cameras' 3x4 world-to-camera ``extrinsic_cv``, row-major, one after the other
+    (12 numbers per camera), or empty."""
     camera_size: tuple[int, ...] = ()
-    """``(height, width)`` [px] the intrinsics refer to, or empty."""
+    """``(height, width)`` [px] the intrinsics refer to (every camera's), or empty."""
 
     def __post_init__(self) -> None:
         o = "AwdaConfig"
         for name in ("camera_intrinsic", "camera_extrinsic", "camera_size"):
             object.__setattr__(self, name, tuple(getattr(self, name)))  # lists from JSON
         sizes = (len(self.camera_intrinsic), len(self.camera_extrinsic), len(self.camera_size))
+        n = sizes[0] // 9
         _check(
-            sizes in ((0, 0, 0), (9, 12, 2)),
+            sizes == (0, 0, 0) or (n >= 1 and sizes == (9 * n, 12 * n, 2)),
             o,
             "camera_intrinsic/extrinsic/size",
             sizes,
-            "all empty, or 9, 12 and 2 numbers",
+            "all empty, or 9 and 12 numbers per camera and 2",
         )
         _check(self.num_attributes >= 1, o, "num_attributes", self.num_attributes, "an int >= 1")
         _check(
@@ -208,7 +213,7 @@ class AwdaConfig:
         )
         _check(
             self.identification_weight == 0.0
-            or (self.trunk.head == "demo-pointer" and sizes == (9, 12, 2)),
+            or (self.trunk.head == "demo-pointer" and self.num_cameras >= 1),
             o,
             "identification_weight",
             self.identification_weight,
@@ -221,6 +226,11 @@ class AwdaConfig:
             self.identification_weight,
             "a float >= 0",
         )
+
+    @property
+    def num_cameras(self) -> int:
+        """How many agent cameras the cell heads vote on the rays of (0: free xyz votes)."""
+        return len(self.camera_intrinsic) // 9
 
     @property
     def waypoint_dim(self) -> int:

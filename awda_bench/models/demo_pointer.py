@@ -120,9 +120,22 @@ class DemoPointer(nn.Module):
         x = x + self.context(x.transpose(1, 2).reshape(b, d, h, w)).flatten(2).transpose(1, 2)
         return self.norm(x), moved, self.object_logit(found)[..., 0]
 
-    def pointer(self, demo: torch.Tensor, first: torch.Tensor, head: torch.Tensor) -> PointerOutput:
+    def pointer(
+        self,
+        demo: torch.Tensor,
+        first: torch.Tensor,
+        head: torch.Tensor,
+        camera: torch.Tensor | None = None,
+    ) -> PointerOutput:
+        """``camera`` ``(B,)``: each sample's camera index (``None``: the first camera)."""
         x, moved, found = self.tokens(demo, first)
-        return PointerOutput(self.readout(x, head, prior=found), moved, found)
+        return PointerOutput(self.readout(x, head, prior=found, camera=camera), moved, found)
 
-    def forward(self, demo: torch.Tensor, first: torch.Tensor, head: torch.Tensor) -> torch.Tensor:
-        return self.pointer(demo, first, head).waypoints
+    def forward(
+        self,
+        demo: torch.Tensor,
+        first: torch.Tensor,
+        head: torch.Tensor,
+        camera: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        return self.pointer(demo, first, head, camera).waypoints

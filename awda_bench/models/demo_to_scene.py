@@ -96,8 +96,15 @@ class DemoToScene(nn.Module):
         scene = (self.project(first) + self.position).flatten(2).transpose(1, 2)
         return demo_tokens, scene
 
-    def forward(self, demo: torch.Tensor, first: torch.Tensor, head: torch.Tensor) -> torch.Tensor:
+    def forward(
+        self,
+        demo: torch.Tensor,
+        first: torch.Tensor,
+        head: torch.Tensor,
+        camera: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """``camera`` ``(B,)``: each sample's camera index (``None``: the first camera)."""
         demo_tokens, x = self.tokens(demo, first)
         for layer in self.layers:
             x = layer(x, demo_tokens)
-        return self.readout(self.norm(x), head)
+        return self.readout(self.norm(x), head, camera=camera)

@@ -9,7 +9,8 @@ steps (``scripts/screening/identify.py``). The labels come from the recorded tra
 waypoints do; no simulator state::
 
     demo cell   where the demonstrator's TCP is at its first grasp, projected through the scene
-                camera onto the demo's first frame's grid          -> CE on the what-moved logits
+                camera (the pair's, which agent and demonstrator share) onto the demo's first
+                frame's grid                                       -> CE on the what-moved logits
     o_1 cell    where the agent trajectory's first grasping point is, projected onto o_1's grid
                                                                    -> CE on the object logits
 
@@ -19,6 +20,8 @@ switched on (``AwdaConfig.identification_weight``, the recipe files).
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
 
 import torch
 import torch.nn.functional as F
@@ -49,18 +52,38 @@ def grasp_cells(
     return row * w + col, grasping.any(dim=1) & ahead
 
 
+def grasp_cells_per_camera(
+    trajectory: torch.Tensor,
+    cameras: Sequence[Camera],
+    camera: torch.Tensor | None,
+    grid: tuple[int, int],
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`grasp_cells` with each row seen through its own camera: ``cameras[camera[i]]``
+    (``camera`` ``None``: every row through the first)."""
+    if camera is None or len(cameras) == 1:
+        return grasp_cells(trajectory, cameras[0], grid)
+    cells = torch.zeros(len(trajectory), dtype=torch.long, device=trajectory.device)
+    ok = torch.zeros(len(trajectory), dtype=torch.bool, device=trajectory.device)
+    for index in torch.unique(camera).tolist():
+        rows = camera == index
+        cells[rows], ok[rows] = grasp_cells(trajectory[rows], cameras[index], grid)
+    return cells, ok
+
+
 def identification_loss(
     moved_logits: torch.Tensor,
     object_logits: torch.Tensor,
     demo_trajectory: torch.Tensor,
     trajectory: torch.Tensor,
-    camera: Camera,
+    cameras: Sequence[Camera],
+    camera: torch.Tensor | None,
     grid: tuple[int, int],
 ) -> tuple[torch.Tensor, dict[str, float]]:
     """Mean of the two cross-entropies (module docstring) over the rows where both the demo and
-    the agent trajectory grasp; zero (with the graph) when none does. ``*_logits (B, h*w)``."""
-    demo_cell, demo_ok = grasp_cells(demo_trajectory, camera, grid)
-    agent_cell, agent_ok = grasp_cells(trajectory, camera, grid)
+    the agent trajectory grasp; zero (with the graph) when none does. ``*_logits (B, h*w)``;
+    each row projects through ``cameras[camera[row]]`` (``camera`` ``None``: the first)."""
+    demo_cell, demo_ok = grasp_cells_per_camera(demo_trajectory, cameras, camera, grid)
+    agent_cell, agent_ok = grasp_cells_per_camera(trajectory, cameras, camera, grid)
     rows = demo_ok & agent_ok
     if not bool(rows.any()):
         zero = (moved_logits.sum() + object_logits.sum()) * 0.0

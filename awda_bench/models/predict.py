@@ -47,6 +47,7 @@ def predict_waypoints(
     first_frame: np.ndarray | torch.Tensor,
     *,
     head: str = "task",
+    camera: int = 0,
 ) -> np.ndarray:
     """One forward pass in eval mode; returns the largest set ``(S, 3 + k)`` as float64 numpy.
 
@@ -55,6 +56,8 @@ def predict_waypoints(
         demo_frames: ``(demo_frames, H, W, 3)`` uint8 or ``(demo_frames, 3, H, W)`` float.
         first_frame: ``(H, W, 3)`` uint8 or ``(3, H, W)`` float: the agent's first frame.
         head: ``task`` (default, for real tasks) or ``synthesized``.
+        camera: the index of the scene's camera among the config's (``camera_*``; the cell heads
+            vote on its rays).
     """
     cfg = model.config
     if head not in HEAD_NAMES[: cfg.num_heads]:
@@ -64,10 +67,11 @@ def predict_waypoints(
     demo = frames_to_tensor(demo_frames, h, w).unsqueeze(0).to(device)
     first = frames_to_tensor(first_frame, h, w).unsqueeze(0).to(device)
     head_index = torch.tensor([HEAD_NAMES.index(head)], device=device)
+    camera_index = torch.tensor([camera], device=device)
     was_training = model.training
     model.eval()
     try:
-        raw = model(demo, first, head_index)
+        raw = model(demo, first, head_index, camera_index)
     finally:
         model.train(was_training)
     largest = model.waypoint_sets(raw)[-1][0]  # (S, 3 + k)

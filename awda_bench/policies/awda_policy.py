@@ -35,6 +35,7 @@ import numpy as np
 from awda_bench.data.trajectory_file import as_stored, trained_jpeg_quality
 from awda_bench.episode import EpisodeContext, observations_of
 from awda_bench.errors import CorruptFileError, UsageError
+from awda_bench.models.agent_cameras import camera_index, config_cameras
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig
 from awda_bench.primitives.config import CENTRE_SUFFIX, ExecutorConfig, LocalizationConfig
@@ -71,22 +72,21 @@ def _resize(frames: np.ndarray, height: int, width: int) -> np.ndarray:
     return np.stack([cv2.resize(f, (width, height), interpolation=cv2.INTER_AREA) for f in frames])
 
 
-def check_camera(config: AwdaConfig, camera: tuple[np.ndarray, np.ndarray]) -> None:
-    """A network whose waypoints are votes on its training camera's rays (a cell head with a
-    camera) refuses a scene whose third-person ``camera`` (intrinsics, extrinsics) is another one."""
-    if not config.camera_intrinsic:
-        return
-    intrinsic, extrinsic = camera
-    want_k = np.asarray(config.camera_intrinsic).reshape(3, 3)
-    want_e = np.asarray(config.camera_extrinsic).reshape(3, 4)
-    if not (
-        np.allclose(intrinsic, want_k, atol=1e-2) and np.allclose(extrinsic, want_e, atol=1e-3)
-    ):
+def check_camera(config: AwdaConfig, camera: tuple[np.ndarray, np.ndarray]) -> int:
+    """The index of the scene's third-person ``camera`` (intrinsics, extrinsics) among the cameras
+    a network votes waypoints on the rays of (a cell head with cameras; 0 for one without); a
+    scene filmed by none of them is refused."""
+    cameras = config_cameras(config)
+    if not cameras:
+        return 0
+    index = camera_index(cameras, camera)
+    if index is None:
         raise UsageError(
-            "this AWDA snapshot votes waypoints on the rays of the camera it was trained with, and "
-            "the scene's third-person camera differs; evaluate it on the suite it was trained on "
-            "(or retrain on data recorded with this camera)"
+            "this AWDA snapshot votes waypoints on the rays of the cameras it was trained with, "
+            "and the scene's third-person camera is none of them; evaluate it on the suite it was "
+            "trained on (or retrain on data recorded with this camera)"
         )
+    return index
 
 
 class AWDAPolicy:
@@ -129,7 +129,7 @@ class AWDAPolicy:
 
         observations = observations_of(ctx)
         demo = observations.demo_frames(self.demo_frames)
-        check_camera(self.model.config, observations.camera())
+        camera = check_camera(self.model.config, observations.camera())
         first = observations.first_frame()
         h, w = self.image_size
         start = time.perf_counter()
@@ -138,6 +138,7 @@ class AWDAPolicy:
             _resize(as_stored(np.asarray(demo), self.jpeg_quality), h, w),
             _resize(as_stored(first[None], self.jpeg_quality), h, w)[0],
             head=self.config.head,
+            camera=camera,
         )
         self.predict_s = time.perf_counter() - start
         waypoints = predicted.copy()

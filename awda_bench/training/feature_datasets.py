@@ -8,7 +8,7 @@ frames it reads (``frames_needed``, ``tosvi_frames_needed``) so the cache encode
 
     "demo_features"        (demo_frames, C, h, w) float32
     "first_frame_features" (C, h, w) float32
-    "trajectory", "demo_trajectory", "head"   as AwdaPairDataset
+    "trajectory", "demo_trajectory", "head", "camera"   as AwdaPairDataset
 
 :class:`CachedTosviSamples` (:class:`~awda_bench.data.datasets.TosviDataset`)::
 
@@ -80,6 +80,7 @@ class CachedAwdaPairs:
             "trajectory": self._labels[_key(agent)],
             "demo_trajectory": self._labels[_key(demo)],
             "head": torch.tensor(head, dtype=torch.int64),
+            "camera": torch.tensor(self.pairs.pair_camera[index], dtype=torch.int64),
         }
 
 

@@ -31,9 +31,9 @@ from typing import Any
 import torch
 from torch.utils.data import default_collate
 
-from awda_bench.data.config import ROLE_AGENT
 from awda_bench.data.datasets import AwdaPairDataset, CollectedData, Selection, TosviDataset
 from awda_bench.errors import ProtocolMismatchError, UnknownChoiceError, UsageError
+from awda_bench.models.agent_cameras import camera_fields, camera_index
 from awda_bench.models.architectures import build_model
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import (
@@ -241,19 +241,19 @@ def check_checkpoint_dir(out: Path, record: dict[str, Any]) -> bool:
 
 
 # ----------------------------------------------------------------------------- pieces
-def agent_camera(data: CollectedData) -> dict[str, Any]:
-    """The ``camera_*`` fields of :class:`AwdaConfig` from the collection's agent camera (the
-    suite's third-person camera is fixed: one episode's is every episode's)."""
-    agents = data.select(ROLE_AGENT)
-    if not agents:
-        raise UsageError(f"{data.root} holds no agent episodes to read the camera from")
-    intrinsic, extrinsic = data.camera(agents[0])
-    size = data.manifest["definition"].get("image_size")
-    return {
-        "camera_intrinsic": tuple(float(v) for v in intrinsic.ravel()),
-        "camera_extrinsic": tuple(float(v) for v in extrinsic.ravel()),
-        "camera_size": tuple(int(v) for v in size),
-    }
+def agent_cameras(
+    data: CollectedData, dataset: AwdaPairDataset, val_dataset: AwdaPairDataset | None
+) -> dict[str, Any]:
+    """The ``camera_*`` fields of :class:`AwdaConfig`: every third-person camera the training
+    pairs' agents were filmed with, then those only the validation pairs were (a suite's scenes
+    may be filmed from several places: MOSAIC's door and drawer from one side, its other
+    families from another). Both datasets' ``"camera"`` indices then point into that list."""
+    cameras = list(dataset.cameras)
+    if val_dataset is not None:
+        cameras += [c for c in val_dataset.cameras if camera_index(cameras, c) is None]
+        val_dataset.index_cameras(cameras)
+    dataset.index_cameras(cameras)
+    return camera_fields(cameras, data.manifest["definition"].get("image_size"))
 
 
 def trunk_config(recipe: Recipe) -> TrunkConfig:
@@ -286,8 +286,8 @@ def frame_stack_of(recipe: Recipe, column: Column) -> int:
 def model_config(
     recipe: Recipe, column: Column, camera: dict[str, Any] | None = None
 ) -> AwdaConfig | TosviConfig:
-    """The network ``column`` trains under ``recipe``; ``camera`` (:func:`agent_camera`) is what
-    the cell heads (``demo-to-scene``, ``demo-pointer``) vote along."""
+    """The network ``column`` trains under ``recipe``; ``camera`` (:func:`agent_cameras`) is
+    what the cell heads (``demo-to-scene``, ``demo-pointer``) vote along."""
     m = recipe.model
     trunk = trunk_config(recipe)
     if column.arch == "awda":
@@ -469,6 +469,10 @@ def run_training(request: TrainRequest) -> TrainOutcome:
         if val_data is not None
         else None
     )
+    cameras: dict[str, Any] = {}
+    if isinstance(dataset, AwdaPairDataset):  # before the cache wrappers read "camera"
+        assert val_dataset is None or isinstance(val_dataset, AwdaPairDataset)
+        cameras = agent_cameras(data, dataset, val_dataset)
     if recipe.model.freeze_backbone:
         assert isinstance(dataset, AwdaPairDataset | TosviDataset)
         dataset = with_cached_features(dataset, recipe, request.progress)
@@ -527,7 +531,7 @@ def run_training(request: TrainRequest) -> TrainOutcome:
 
     t = recipe.train
     torch.manual_seed(t.seed)  # initial weights (a resumed run loads them from its snapshot)
-    model = build_model(model_config(recipe, column, agent_camera(data)))
+    model = build_model(model_config(recipe, column, cameras or None))
     config = TrainConfig(
         learning_rate=t.learning_rate,
         batch_size=t.batch_size,
