@@ -837,7 +837,8 @@ def write_summary(config: ReproduceConfig) -> Path:
         f"{PAPER_IMAGE.get(config.suite, PAPER_SCALE['image'])} |",
         f"| demos per training task | {d.get('episodes_per_task')} per embodiment; "
         f"{d.get('synthesize', 0)} synthesized; kept {kept} | {PAPER_SCALE['demos_per_task']} |",
-        f"| training | {recipe.train.max_steps} steps x batch {recipe.train.batch_size}, snapshot "
+        f"| training | {_train_target(config.recipe, config.steps)} steps x batch "
+        f"{recipe.train.batch_size}, snapshot "
         f"every {recipe.train.snapshot_every_steps} | {PAPER_SCALE['steps']} |",
         f"| dataset fingerprint | `{manifest.get('fingerprint')}` | – |",
         f"| grasp target (AWDA columns) | `{config.grasp_select}` (`reproduce --grasp-select`) "
