@@ -59,6 +59,8 @@ class AwdaNet(nn.Module):
         super().__init__()
         self.config = config
         self.trunk = VisualTrunk(config.trunk, load_backbone_weights)
+        self.ray_cameras = config_ray_cameras(config)
+        """The config's cameras, read once (the readout's rays, the identification labels)."""
         trunk = config.trunk
         self.scene_head: DemoToScene | DemoPointer | None = None
         if trunk.head in CELL_HEADS:
@@ -72,7 +74,7 @@ class AwdaNet(nn.Module):
                 waypoints=config.total_waypoints,
                 waypoint_dim=config.waypoint_dim,
                 num_heads=config.num_heads,
-                cameras=config_ray_cameras(config),
+                cameras=self.ray_cameras,
             )
             self.grid = shape.grid
             if trunk.head == "demo-pointer":
@@ -194,7 +196,7 @@ class AwdaNet(nn.Module):
                 pointed.object_logits,
                 batch["demo_trajectory"],
                 batch["trajectory"],
-                config_ray_cameras(cfg),  # AwdaConfig checks there is one
+                self.ray_cameras,  # AwdaConfig checks there is one
                 camera,
                 self.grid,
             )
