@@ -14,6 +14,14 @@ and the CLI stay one program in ``.venv``.
 
     .venv (CLI, sweep, store)  --socket pair, pickled jobs/records-->  .venv-metaworld worker
                                                                        (EpisodeExecutor: env+policy)
+    .venv (driver, Ray)        --Ray actor calls------------------->  .venv-metaworld actor
+                                 (runtime_env py_executable)           (the same executor)
+
+With ``--backend ray`` the actors are Ray's per-actor runtime environment: ``py_executable`` names
+the second environment's interpreter and ``PYTHONPATH`` this checkout, so an actor imports
+Meta-World's MuJoCo, never the driver's (:class:`~awda_bench.harness.ray_pool.RayActorPool`). That
+environment holds Ray too, at the driver's version (checked at start: :func:`check_worker_ray`).
+On a cluster every node needs the checkout and ``.venv-metaworld`` at the same paths.
 """
 
 from __future__ import annotations
@@ -63,14 +71,37 @@ def worker_python(simulator: str) -> str | None:
 
 def check_local_workers(suite: str, simulator: str, workers: int, backend: str) -> None:
     """Refuse, in one line, a schedule that would play ``simulator``'s episodes where its
-    environment is not: ``--workers 0`` plays in this process, and Ray actors start from the
-    cluster's environment; nothing to refuse for a simulator that runs here."""
+    environment is not: ``--workers 0`` plays in this process. Local workers and Ray actors start
+    from the second environment's interpreter (:func:`worker_python`; Ray: a per-actor
+    ``py_executable``), so both backends are fine with ``--workers >= 1``; nothing to refuse for a
+    simulator that runs here."""
     if simulator not in SECOND_VENVS:
         return
-    if workers == 0 or backend != "local":
+    if workers == 0:
         raise UsageError(
-            f"suite {suite!r} runs in its own environment's worker processes: use "
-            "--backend local with --workers >= 1"
+            f"suite {suite!r} runs in its own environment's worker processes "
+            f"({SECOND_VENVS[simulator]}), not in this one: use --workers >= 1 "
+            f"(--backend {backend})"
+        )
+
+
+def check_worker_ray(python: str, driver_version: str) -> None:
+    """Ray actors started from another interpreter (``runtime_env={"py_executable": python}``)
+    need Ray installed there, at the driver's version (a worker of another version cannot join
+    the driver's Ray instance): one-line error naming the fix otherwise."""
+    code = "import ray, sys; sys.stdout.write(ray.__version__)"
+    out = subprocess.run([python, "-c", code], capture_output=True, text=True)
+    if out.returncode != 0:
+        raise UsageError(
+            f"--backend ray starts actors from {python}, which has no Ray; re-run "
+            "`bash scripts/setup.sh` (it installs the Ray of requirements-metaworld.txt) or use "
+            "--backend local"
+        )
+    if out.stdout.strip() != driver_version:
+        raise UsageError(
+            f"--backend ray: {python} has ray {out.stdout.strip()}, this environment ray "
+            f"{driver_version}; install the same version in both (`pip install "
+            f"ray=={driver_version}` with that interpreter) or use --backend local"
         )
 
 

@@ -99,10 +99,11 @@ def test_bad_input_is_one_line(
     assert not out.exists()
 
 
-def test_ray_is_refused_in_one_line(tmp_path: Path) -> None:
+@pytest.mark.parametrize("backend", ["local", "ray"])
+def test_collecting_in_this_process_is_refused_in_one_line(tmp_path: Path, backend: str) -> None:
     config = tiny_config(tmp_path / "data")
-    with pytest.raises(UsageError, match="--backend local with --workers >= 1") as err:
-        make_plan(CollectConfig(**{**config.__dict__, "backend": "ray"}))
+    with pytest.raises(UsageError, match="--workers >= 1") as err:
+        make_plan(CollectConfig(**{**config.__dict__, "backend": backend, "workers": 0}))
     assert "\n" not in str(err.value)
 
 
@@ -211,6 +212,19 @@ def test_same_command_again_is_the_same_data_and_one_worker_too(tiny: Path, tmp_
     first = json.loads((tiny / MANIFEST).read_text())
     second = json.loads((again / MANIFEST).read_text())
     assert first["fingerprint"] == second["fingerprint"]
+
+
+@pytest.mark.slow
+@needs_metaworld
+def test_collecting_on_ray_actors_from_the_second_environment_is_the_same_data(
+    tiny: Path, tmp_path: Path
+) -> None:
+    on_ray = tmp_path / "ray"
+    result = run_collect(CollectConfig(**{**tiny_config(on_ray).__dict__, "backend": "ray"}))
+    assert result.complete and result.errors == 0, result.error_messages
+    ours, theirs = arrays_of(tiny), arrays_of(on_ray)
+    assert ours.keys() == theirs.keys()
+    assert all(np.array_equal(v, theirs[k]) for k, v in ours.items())
 
 
 @pytest.mark.slow

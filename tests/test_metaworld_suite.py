@@ -96,16 +96,32 @@ def test_a_missing_second_environment_is_one_line_naming_setup(
     assert not (tmp_path / "r").exists()
 
 
-@pytest.mark.parametrize("workers, backend", [(0, "local"), (1, "ray")])
-def test_workers_outside_the_second_environment_are_refused(
-    tmp_path: Path, workers: int, backend: str
-) -> None:
+@pytest.mark.parametrize("backend", ["local", "ray"])
+def test_playing_in_this_process_is_refused(tmp_path: Path, backend: str) -> None:
     config = SweepConfig(
-        suite="metaworld", method="random", out=tmp_path / "r", workers=workers, backend=backend
+        suite="metaworld", method="random", out=tmp_path / "r", workers=0, backend=backend
     )
     with pytest.raises(UsageError, match="--workers >= 1") as err:
         prepare_sweep(config)
     assert "\n" not in str(err.value)
+
+
+def test_ray_actors_need_ray_at_the_drivers_version_in_the_second_environment(
+    tmp_path: Path,
+) -> None:
+    from awda_bench.runtimes import check_worker_ray
+
+    no_ray = tmp_path / "python"  # an interpreter whose `import ray` fails
+    no_ray.write_text("#!/bin/sh\nexit 1\n")
+    no_ray.chmod(0o755)
+    with pytest.raises(UsageError, match="has no Ray.*bash scripts/setup.sh") as err:
+        check_worker_ray(str(no_ray), "2.60.0")
+    assert "\n" not in str(err.value)
+    other = tmp_path / "python-other"
+    other.write_text("#!/bin/sh\nprintf 1.2.3\n")
+    other.chmod(0o755)
+    with pytest.raises(UsageError, match="has ray 1.2.3, this environment ray 2.60.0"):
+        check_worker_ray(str(other), "2.60.0")
 
 
 def test_videos_are_refused_in_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -182,7 +198,14 @@ def probes_importable(monkeypatch: pytest.MonkeyPatch) -> None:
     )
 
 
-def _sweep(out: Path, method: str, workers: int, tasks: tuple[int, ...], episodes: int) -> Any:
+def _sweep(
+    out: Path,
+    method: str,
+    workers: int,
+    tasks: tuple[int, ...],
+    episodes: int,
+    backend: str = "local",
+) -> Any:
     return run_sweep(
         SweepConfig(
             suite="metaworld",
@@ -192,13 +215,14 @@ def _sweep(out: Path, method: str, workers: int, tasks: tuple[int, ...], episode
             workers=workers,
             tasks=tasks,
             progress=False,
+            backend=backend,
         )
     )
 
 
 @pytest.mark.slow
 @needs_metaworld
-def test_layouts_are_seeded_identical_across_workers_and_different_across_seeds(
+def test_layouts_are_seeded_identical_across_workers_backends_and_different_across_seeds(
     tmp_path: Path, probes_importable: None
 ) -> None:
     suite = load_suite("metaworld")
@@ -208,6 +232,10 @@ def test_layouts_are_seeded_identical_across_workers_and_different_across_seeds(
     assert first.errors == second.errors == 0 and first.ran == second.ran == 4
     a, b = _records(tmp_path / "a"), _records(tmp_path / "b")
     assert a == b  # same spec, other worker process (and another run): the same observations
+    # Ray actors started from .venv-metaworld's interpreter (runtime_env py_executable)
+    on_ray = _sweep(tmp_path / "ray", "metaworld_probe:ProbePolicy", 2, tasks, 2, "ray")
+    assert on_ray.errors == 0 and on_ray.ran == 4
+    assert _records(tmp_path / "ray") == a
     probes = {key: np.array(json.loads(row[-1])) for key, row in a.items()}
     for task in tasks:
         assert not np.array_equal(probes[(task, 0)], probes[(task, 1)])  # another seed

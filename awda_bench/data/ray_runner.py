@@ -2,6 +2,7 @@
 actors (:class:`~awda_bench.harness.ray_pool.RayActorPool`), each holding a
 :class:`~awda_bench.data.pool.RecorderExecutor` exactly like a local collect worker.
 
+Meta-World's actors start from ``.venv-metaworld``'s interpreter (:mod:`awda_bench.runtimes`).
 Results (the recorded episode's frames and arrays) travel back to the driver, the only writer of
 DATA_DIR, so shards, discards, retries of failed attempts and resume mean what they mean locally.
 """
@@ -12,6 +13,8 @@ from awda_bench.data.config import CollectConfig
 from awda_bench.data.plan import CollectJob
 from awda_bench.data.pool import JobResult, RecorderExecutor, lost_job_result
 from awda_bench.harness.ray_pool import RayActorPool
+from awda_bench.runtimes import worker_python
+from awda_bench.suites import load_suite
 
 
 class RayJobRunner(RayActorPool[CollectJob, JobResult]):
@@ -25,4 +28,5 @@ class RayJobRunner(RayActorPool[CollectJob, JobResult]):
             lost=lost_job_result,
             job_timeout_s=lambda _job: config.episode_timeout_s,
             address=address,
+            python=worker_python(load_suite(config.suite, config.suites_dir).simulator),
         )

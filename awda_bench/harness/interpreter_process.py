@@ -61,11 +61,16 @@ def child_environment() -> dict[str, str]:
     """This process's environment variables, with the checkout first on ``PYTHONPATH`` and one
     thread per BLAS/OpenMP pool (as spawned workers have)."""
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(
-        p for p in (CODE_ROOT, os.environ.get("PYTHONPATH", "")) if p
-    )
+    env["PYTHONPATH"] = child_pythonpath()
     env.update({k: "1" for k in THREAD_VARS})
     return env
+
+
+def child_pythonpath() -> str:
+    """``PYTHONPATH`` of a worker started from another interpreter: this checkout first, then
+    this process's own ``PYTHONPATH`` (never its ``sys.path``, which names its environment's
+    site-packages)."""
+    return os.pathsep.join(p for p in (CODE_ROOT, os.environ.get("PYTHONPATH", "")) if p)
 
 
 def start_in_interpreter(

@@ -53,8 +53,10 @@ from typing import Any
 
 from awda_bench.errors import MissingExtraError, UsageError
 from awda_bench.harness.episode_record import EpisodeRecord
+from awda_bench.harness.interpreter_process import CODE_ROOT, child_pythonpath
 from awda_bench.harness.job_pool import THREAD_VARS, Executor, J, JobPool, R, WorkerStartError
 from awda_bench.harness.worker_pool import EpisodeExecutor, Job, WorkerConfig, pool_settings
+from awda_bench.runtimes import check_worker_ray, worker_python
 from awda_bench.suites import Suite
 
 RAY_INSTALL_HINT = "pip install -e '.[ray]'"
@@ -108,6 +110,16 @@ def require_ray() -> ModuleType:
             "(or use --backend local)"
         ) from exc
     return ray
+
+
+def interpreter_runtime_env(python: str) -> dict[str, Any]:
+    """Ray's per-actor runtime environment for actors started from ``python`` (another virtual
+    environment's interpreter): that executable, this checkout first on ``PYTHONPATH`` and one
+    thread per BLAS/OpenMP pool, as :func:`~awda_bench.harness.interpreter_process.child_environment`
+    gives a local worker started from it."""
+    env_vars = {name: "1" for name in THREAD_VARS}
+    env_vars["PYTHONPATH"] = child_pythonpath()
+    return {"py_executable": python, "env_vars": env_vars}
 
 
 class PoolActor:
@@ -184,11 +196,17 @@ class RayActorPool(JobPool[J, R]):
         workers: int,
         *,
         address: str | None = None,
+        python: str | None = None,
         **settings: Any,
     ) -> None:
         super().__init__(build, config, workers, **settings)
         self._ray = require_ray()
         self.address = address
+        self.python = python
+        """Another environment's interpreter the actors start from (Ray's per-actor
+        ``py_executable``: Meta-World's ``.venv-metaworld``), or ``None`` for the driver's."""
+        if python is not None:
+            check_worker_ray(python, self._ray.__version__)
         self.requeued = 0
         """Jobs queued again because their actor was lost."""
         self.connect_s = 0.0
@@ -247,7 +265,11 @@ class RayActorPool(JobPool[J, R]):
     # --- scheduling ----------------------------------------------------------------------------
 
     def _spawn(self, first_generation: bool) -> _Slot:
-        handle = self._actor_cls.remote(self.build, self.config, list(sys.path))
+        if self.python is None:
+            handle = self._actor_cls.remote(self.build, self.config, list(sys.path))
+        else:  # the driver's sys.path would import this environment's packages: the code alone
+            actor = self._actor_cls.options(runtime_env=interpreter_runtime_env(self.python))
+            handle = actor.remote(self.build, self.config, [CODE_ROOT])
         return _Slot(handle, handle.start.remote(), time.monotonic(), first_generation)
 
     def _respawn(self, slot: _Slot) -> _Slot:
@@ -391,4 +413,7 @@ class RayWorkerPool(RayActorPool[Job, EpisodeRecord]):
     ) -> None:
         self.suite = suite
         settings = pool_settings(config, suite)
-        super().__init__(EpisodeExecutor, config, workers, address=address, **settings)
+        python = worker_python(suite.simulator)  # Meta-World: its own environment's interpreter
+        super().__init__(
+            EpisodeExecutor, config, workers, address=address, python=python, **settings
+        )
