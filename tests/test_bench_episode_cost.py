@@ -25,7 +25,7 @@ def test_rows_side_by_side_count_what_each_method_renders(capsys) -> None:
     assert run_episode_cost_bench(args) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0].startswith("pick_place: 1 episodes per method")
-    rows = {line.split()[0]: line.split()[1:] for line in lines[2:]}
+    rows = {line.split()[0]: line.split()[1:] for line in lines[2:4]}
     assert set(rows) == {"scripted", "gt-waypoints"}
     steps, wall, wall_cached, agent_frames, demo_frames, inference_ms, _ = (
         float(x) for x in rows["scripted"]
@@ -36,3 +36,10 @@ def test_rows_side_by_side_count_what_each_method_renders(capsys) -> None:
     # gt-waypoints renders wrist depth frames during its grasp (hover) phase only
     gt_agent_frames = float(rows["gt-waypoints"][3])
     assert 1 <= gt_agent_frames < float(rows["gt-waypoints"][0])
+    # where a step's time goes: the expert neither encodes nor runs a network; the simulator
+    # and the expert's own step account for the wall time
+    assert lines[6].split()[:4] == ["method", "wall", "env", "act"]
+    per_step = {line.split()[0]: [float(x) for x in line.split()[1:]] for line in lines[7:9]}
+    wall_ms, env_ms, act_ms, encode_ms, net_ms, other_ms = per_step["scripted"]
+    assert encode_ms == net_ms == 0 and env_ms > 0 and act_ms >= 0
+    assert env_ms + act_ms <= wall_ms <= 1.5 * (env_ms + act_ms) + 1

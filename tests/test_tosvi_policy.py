@@ -112,6 +112,7 @@ def test_cached_stack_equals_the_full_forward_pass(
         np.testing.assert_allclose(action[0, :3], expected[:3], atol=1e-5)
         assert action[0, 3] == (1.0 if expected[3] > 0 else -1.0)
     assert policy.steps == 5 and policy.inference_s > 0 and not policy.done
+    assert 0 < policy.encode_s < policy.inference_s  # frames through the trunk, then attention
 
 
 def test_cached_depth_vectors_equal_the_full_forward_pass(

@@ -8,6 +8,11 @@ video is recorded on the first episode a worker sees and cached for every later 
 (:func:`awda_bench.demo_recording.demo_video_frames`), so both costs are printed: ``demo``
 (recording it) and the rest of the episode. Inference is the policy's own timer (``predict_s`` of
 ``awda``: one forward pass per episode; ``inference_s`` of ``tosvi``: every step).
+
+Where a cached episode's time goes, per step (second table): ``env`` (the simulator's step and
+the controller's IK, the record's ``env_time_s``), ``encode`` (frames through the trunk: ``tosvi``'s
+``encode_s``), ``net`` (the rest of inference: attention and heads), ``render+other`` (the
+policy's time outside inference: rendering its camera frames, JPEG round trip, resizing).
 """
 
 from __future__ import annotations
@@ -76,6 +81,9 @@ def measure(suite_name: str, method: str, checkpoints: Path | None, episodes: in
                 {
                     "cached": cached,
                     "wall_s": wall,
+                    "env_s": record.env_time_s,
+                    "act_s": record.act_time_s,
+                    "encode_s": float(getattr(policy, "encode_s", 0.0)),
                     "steps": record.steps,
                     "agent_frames": _frames(env.unwrapped) - agent0,
                     "demo_frames": _demo_frames() - demo0,
@@ -121,5 +129,22 @@ def run_episode_cost_bench(args: argparse.Namespace) -> int:
             f"{mean(warm, 'wall_s'):>21.2f} {mean(warm, 'agent_frames'):>13.1f} "
             f"{mean(cold, 'demo_frames'):>12.1f} {inference_ms:>16.1f} "
             f"{inference_ms / max(steps, 1):>8.2f}"
+        )
+    print("\nper step of a cached episode [ms]")
+    print(
+        f"{'method':<16} {'wall':>7} {'env':>7} {'act':>7} {'encode':>7} {'net':>7} "
+        f"{'render+other':>13}"
+    )
+    for r in results:
+        warm = [x for x in r["rows"] if x["cached"]]
+        per_step = {
+            key: 1000 * float(np.mean([x[key] / max(x["steps"], 1) for x in warm]))
+            for key in ("wall_s", "env_s", "act_s", "encode_s", "inference_s")
+        }
+        net = per_step["inference_s"] - per_step["encode_s"]
+        other = per_step["act_s"] - per_step["inference_s"]
+        print(
+            f"{r['method']:<16} {per_step['wall_s']:>7.1f} {per_step['env_s']:>7.1f} "
+            f"{per_step['act_s']:>7.1f} {per_step['encode_s']:>7.1f} {net:>7.1f} {other:>13.1f}"
         )
     return 0

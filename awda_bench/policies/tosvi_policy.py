@@ -120,6 +120,10 @@ class TosviPolicy:
         """The attention inputs of o_{t-5} .. o_t (+depth: already fused with their depth)."""
         self.inference_s = 0.0
         """Wall time of this episode's forward passes [s] (rendering excluded)."""
+        self.encode_s = 0.0
+        """The part of :attr:`inference_s` spent encoding frames (the demo's once, then one
+        live frame a step: the trunk, + depth ResNet and fusion) [s]; the rest is the attention
+        layers and the policy head."""
         self.steps = 0
         """Actions produced this episode."""
 
@@ -148,6 +152,7 @@ class TosviPolicy:
                 maps = self.model.fuse_depth(maps, zeros)
             self._demo_features = maps
         self.inference_s = time.perf_counter() - start
+        self.encode_s = self.inference_s
         self._frames.clear()
         self.steps = 0
 
@@ -168,7 +173,9 @@ class TosviPolicy:
                 tensor = torch.from_numpy(depth_m.astype(np.float32)).to(self.device)
                 vector = self.model.depth_vectors(tensor[None, None, None])  # (1, 1, 512)
                 features = self.model.fuse_depth(features, vector)
-        self.inference_s += time.perf_counter() - start
+        encode = time.perf_counter() - start
+        self.inference_s += encode
+        self.encode_s += encode
         copies = self.frame_stack if not self._frames else 1
         for _ in range(copies):
             self._frames.append(features[:, 0])
