@@ -145,27 +145,33 @@ FIT_CHECK_SNAPSHOTS = 3
 class Costs:
     """Per-unit wall times [s] for the printed estimate (2-core CPU machine, idle, 2026-11)."""
 
-    collect_episode_s: float = 2.1
-    """Per kept episode with 2 workers at 240x320 (760 episodes in 1588 s)."""
+    collect_episode_s: float = 1.75
+    """Per kept episode with 2 workers at 240x320 (pick-place: 760 episodes in 1314 s on an idle
+    fresh machine, pick_place-small-v4; 1588-2154 s beside other work)."""
     train_step_s: dict[str, float] = field(
         default_factory=lambda: {"awda": 2.23, "tosvi": 3.16, "tosvi-depth": 4.7}
     )
     """Per step of the ``small`` recipe, 2 threads (``recipes/small.toml`` has the measurements)."""
-    frozen_step_s: float = 0.8
-    """Per step of a frozen-backbone recipe over cached features (``small``: 0.5-0.6 s alone,
-    0.75-0.84 s beside another job; batch 16, 2 threads, 2026-12-02)."""
+    frozen_step_s: float = 0.3
+    """Per step of a frozen-backbone recipe over cached features (``small``: median compute
+    0.28 s a step on the idle machine in pick_place-small-v4 and -v7, plus ~0.01 s of data;
+    0.49-0.65 s beside another job, -v5; batch 16, 2 threads)."""
     frozen_tosvi_step_s: dict[str, float] = field(
-        default_factory=lambda: {"tosvi": 0.6, "tosvi-depth": 1.2}
+        default_factory=lambda: {"tosvi": 1.4, "tosvi-depth": 2.8}
     )
-    """Per T-OSVI step over cached maps pooled 2x2 (``small``: batch 16, 2 threads, a synthetic
-    batch, session 12, after the attention fix that took it from 2.0 s). tosvi-depth (which trains
-    its depth ResNet-18 over 96 wrist depth images a step) is not measured since that fix: it is
-    scaled by the ratio measured before it (10.7 s vs 5.3 s at 1 thread beside a 2-thread job)."""
+    """Per T-OSVI step over cached maps pooled 2x2 (``small``: batch 16, 2 threads): the median
+    compute of a real run's steps on the idle machine, 1.39 s (MOSAIC drawer, steps 601-640,
+    2026-12-03; pick-place's v6 run: 1.31 s median, partly beside helper sessions). A synthetic
+    batch had given 0.6 s (session 12), which the plan printed until session 17 and which made
+    its T-OSVI estimates ~2.3x too short. tosvi-depth (which trains its depth ResNet-18 over 96
+    wrist depth images a step) is not measured since the attention fix: it is scaled by the ratio
+    measured before it (10.7 s vs 5.3 s at 1 thread beside a 2-thread job)."""
     agent_episode_steps: float = 62.4
     """Mean steps of a kept pick-place agent episode (T-OSVI caches every agent frame; the
     20-per-task train split: 17,472 steps in 280 episodes)."""
-    encode_frame_s: float = 0.077
-    """Encoding one 240x320 frame into the feature cache (5,080 frames in ~6.5 min, busy)."""
+    encode_frame_s: float = 0.035
+    """Encoding one 240x320 frame into the feature cache (pick-place's T-OSVI cache: 20,272
+    frames at ~29 frames/s, pick_place-small-v6; 0.077 s beside another job)."""
     paper_step_factor: float = 32.0
     """``paper`` recipe step cost ÷ ``small``'s on a CPU (~71 s vs 2.23 s)."""
     eval_episode_s: dict[str, float] = field(
