@@ -2,7 +2,8 @@
 
 ::
 
-    OUT/data/train        collect --split train   (agent + demonstrator episodes, synthesized)
+    OUT/data/train        collect --split train   (agent + demonstrator episodes, synthesized;
+                                                   --data DIR: that collection instead)
     OUT/data/test         collect --split test    (validation pairs; pick-place only)
     OUT/checkpoints/COL   train  (one Table S3 column each: snapshots every M steps)
     OUT/runs              run    (last N snapshots x the protocol's episodes, one store, the
@@ -208,6 +209,11 @@ class ReproduceConfig:
     fit_check: bool = True
     grasp_select: str = DEFAULT_GRASP_SELECT
     """AWDA columns' grasp rule (:data:`DEFAULT_GRASP_SELECT`; one of ``GRASP_SELECTS``)."""
+    data: Path | None = None
+    """The training collection; ``None``: ``OUT/data/train``. The collection holds every training
+    task of the suite whatever ``hold_out`` (``train --hold-out`` leaves the family's episodes
+    out), so MOSAIC's six leave-one-family-out runs can share one collection, and its feature
+    cache, each in its own ``out``."""
     dry_run: bool = False
     progress: bool = True
     """Let each stage show its progress bar (with ETA) on stderr."""
@@ -225,6 +231,11 @@ class Stage:
     config: CollectConfig | SweepConfig | None = None
     """What a ``collect`` or ``run`` stage's command decides (its ``argv`` says the same); the
     plan reads its progress from it."""
+
+
+def train_data(config: ReproduceConfig) -> Path:
+    """Where the training collection is (or is collected to): ``--data`` or ``OUT/data/train``."""
+    return config.data if config.data is not None else config.out / "data" / "train"
 
 
 def parse_columns(text: str) -> tuple[str, ...]:
@@ -412,7 +423,7 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         )
     suite = load_suite(config.suite)
     out = config.out
-    data, test = out / "data" / "train", out / "data" / "test"
+    data, test = train_data(config), out / "data" / "test"
     quiet = _quiet(config.progress)
     stages: list[Stage] = []
     from awda_bench.data.plan import split_tasks
@@ -800,6 +811,8 @@ def command_line(config: ReproduceConfig) -> str:
             words.append(f"{flag} {value}")
     if not config.fit_check:
         words.append("--no-fit-check")
+    if config.data is not None:
+        words.append(f"--data {config.data}")
     words.append(f"--out {config.out}")
     return " ".join(words)
 
@@ -814,7 +827,7 @@ def write_summary(config: ReproduceConfig) -> Path:
     summary = json.loads((report / "summary.json").read_text())
     recipe = load_recipe(config.recipe)
     model = recipe.for_suite(config.suite).model  # the sizes it trains this suite with
-    manifest = _manifest(out / "data" / "train") or {}
+    manifest = _manifest(train_data(config)) or {}
     d = manifest.get("definition", {})
     counts = manifest.get("counts", {}).get("by_role", {})
     kept = {role: c.get("kept") for role, c in counts.items()}

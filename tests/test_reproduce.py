@@ -88,6 +88,7 @@ def test_the_summary_names_the_command_that_decides_the_same_config(tmp_path: Pa
         {},
         {"columns": ("full-1", "tosvi"), "steps": 40, "grasp_select": "waypoint", "workers": 1},
         {"suite": "mosaic", "hold_out": "drawer", "fit_check": False, "episodes": 4},
+        {"suite": "mosaic", "hold_out": "door", "data": tmp_path / "shared" / "train"},
     ):
         config = ReproduceConfig(
             **{"suite": "pick_place", "out": tmp_path / "rep", "recipe": "small", **kw}
@@ -157,6 +158,38 @@ def test_finished_stages_are_recognized(tmp_path: Path) -> None:
     # other data than asked for is not "done": collect then refuses or resumes it by itself
     assert not _plan(tmp_path, columns=("full-1",), episodes_per_task=5)["collect train"].done  # type: ignore[attr-defined]
     assert not _plan(tmp_path, columns=("full-1",), steps=20)["train full-1"].done  # type: ignore[attr-defined]
+
+
+def test_leave_one_family_out_runs_can_share_one_collection(tmp_path: Path) -> None:
+    """--data: the collection (and its feature cache) of another run directory; every training
+    task is in it whatever the hold-out, and train leaves the held-out family out."""
+    shared = tmp_path / "rp-drawer" / "data" / "train"
+    shared.mkdir(parents=True)
+    definition = {"split": "train", "episodes_per_task": 10, "synthesize": 200}
+    (shared / "manifest.json").write_text(json.dumps({"complete": True, "definition": definition}))
+    out = tmp_path / "rp-door"
+    stages = {
+        s.name: s
+        for s in plan_stages(
+            ReproduceConfig(
+                suite="mosaic", hold_out="door", out=out, data=shared, episodes_per_task=10,
+                columns=("full-1",),
+            )
+        )
+    }  # fmt: skip
+    assert stages["collect train"].done
+    assert stages["collect train"].config.out == shared  # type: ignore[union-attr]
+    train = stages["train full-1"].argv
+    assert train[train.index("--data") + 1] == str(shared)
+    assert train[train.index("--hold-out") + 1] == "door"
+    assert train[train.index("--out") + 1] == str(out / "checkpoints" / "full-1")
+    # without --data the run collects into its own directory: nothing there yet
+    config = ReproduceConfig(
+        suite="mosaic", hold_out="door", out=out, episodes_per_task=10, columns=("full-1",)
+    )
+    alone = {s.name: s for s in plan_stages(config)}
+    assert not alone["collect train"].done
+    assert alone["collect train"].config.out == out / "data" / "train"  # type: ignore[union-attr]
 
 
 @pytest.mark.parametrize(

@@ -78,6 +78,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument(
         "--out", type=Path, default=None, help="directory (default runs/reproduce-SUITE-RECIPE)"
     )
+    parser.add_argument(
+        "--data",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="the training collection (default OUT/data/train; collected there if incomplete). "
+        "It holds every training task whatever --hold-out, so MOSAIC's leave-one-family-out runs "
+        "can share one: --hold-out door --data runs/rp-drawer/data/train --out runs/rp-door",
+    )
     parser.add_argument("--dry-run", action="store_true", help="print the plan and stop")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars in stages")
     return parser
@@ -107,6 +116,7 @@ def config_from_args(args: argparse.Namespace) -> ReproduceConfig:
         threads=args.threads,
         fit_check=not args.no_fit_check,
         grasp_select=args.grasp_select,
+        data=args.data,
         dry_run=args.dry_run,
         progress=not args.no_progress,
     )
