@@ -126,6 +126,32 @@ def test_tables_show_the_cells_and_flag_errors(run_dir: Path, tmp_path: Path) ->
     )
 
 
+def test_per_task_table_counts_each_tasks_ok_episodes_and_successes(
+    run_dir: Path, tmp_path: Path
+) -> None:
+    import pandas as pd
+
+    write_report(run_dir, tmp_path, "success_at_end")
+    table = pd.read_csv(tmp_path / "per_task.csv")
+    rows = (
+        sqlite3.connect(run_dir / STORE_NAME)
+        .execute(
+            "SELECT method, task, family, COUNT(*), SUM(success_at_end) FROM episodes "
+            "WHERE status = 'ok' GROUP BY method, task"
+        )
+        .fetchall()
+    )
+    got = {
+        (r.method, r.task): (r.family, r.episodes, r.successes, r.rate) for r in table.itertuples()
+    }
+    assert len(got) == len(rows) > 2
+    for method, task, family, n, successes in rows:
+        assert got[(method, task)] == (family, n, successes, pytest.approx(successes / n))
+    # raising fails episode 1 of each task: those rows are not episodes of the table
+    assert all(got[("raising", t)][1] == 5 for m, t in got if m == "raising")
+    assert "## Success per task" in (tmp_path / "report.md").read_text()
+
+
 def test_grasp_waypoint_spread_follows_the_scene_not_a_constant() -> None:
     import pandas as pd
 

@@ -237,3 +237,20 @@ def grasp_analysis(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
             "suite", "method", "episodes", "reached", "grasped", "success", "grasp_wp_spread_cm"
         ],
     )  # fmt: skip
+
+
+def per_task(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
+    """Per (suite, method, task): ok episodes, successes and rate, pooled over snapshots. A MOSAIC
+    family mixes variations that a policy can pass by accident (a random hand shuts a drawer) with
+    ones it cannot: the family's cell alone does not say which it passed."""
+    ok = episodes[episodes["status"] == "ok"]
+    out = [
+        {
+            "suite": suite, "method": method, "task": int(task), "family": g["family"].iloc[0],
+            "episodes": len(g), "successes": int(g[metric].sum()), "rate": float(g[metric].mean()),
+        }
+        for (suite, method, task), g in ok.groupby(["suite", "method", "task"], sort=True)
+    ]  # fmt: skip
+    return pd.DataFrame(
+        out, columns=["suite", "method", "task", "family", "episodes", "successes", "rate"]
+    )

@@ -8,6 +8,7 @@ Written files::
     s4.{md,csv,tex}             MOSAIC families + All (only when such families were evaluated)
     per_snapshot.{md,csv,tex}   success per snapshot, every method
     grasp.{md,csv,tex}          reached / grasped / success per (suite, method)
+    per_task.{md,csv,tex}       success per (suite, method, task), pooled over snapshots
     counts.{md,csv,tex}         expected vs recorded episodes, errors
     errors.{md,csv,tex}         one line per error episode (when there are any)
     figures/success_vs_snapshot_<suite>_<method>.png   learned methods
@@ -199,6 +200,13 @@ def write_report(
             grasp,
         )
     )
+    sections.append(
+        (
+            "per_task",
+            "Success per task (ok episodes pooled over snapshots)",
+            aggregate.per_task(episodes, metric).set_index("suite"),
+        )
+    )
     sections.append(("counts", "Episode counts", counts))
     errors = episodes[episodes["status"] == "error"]
     if len(errors):
@@ -244,7 +252,7 @@ def write_report(
     return result
 
 
-_OUTPUT_STEMS = ("s3", "s4", "per_snapshot", "grasp", "counts", "errors")
+_OUTPUT_STEMS = ("s3", "s4", "per_snapshot", "grasp", "per_task", "counts", "errors")
 """Table files a report may write (``<stem>.md/.csv/.tex``)."""
 
 
