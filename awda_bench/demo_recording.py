@@ -20,7 +20,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from awda_bench.episode import EpisodeContext, EpisodeSpec
+from awda_bench.episode import EpisodeContext, EpisodeSpec, demo_frame_indices
 from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.experts import EMBODIMENT_NAMES, make_expert
 from awda_bench.render_device import render_backend
@@ -189,7 +189,7 @@ def demo_video_frames(
     render_every: int = 4,
 ) -> np.ndarray:
     """The demonstrator's video of ``(task, demo_seed)`` subsampled to ``count`` frames
-    ``(count, H, W, 3)`` uint8, first and last included. ``envs`` caches the demo envs.
+    ``(count, H, W, 3)`` uint8, first and last included (:func:`demo_frame_indices`). ``envs`` caches the demo envs.
 
     Each demo is recorded in a rebuilt scene (``fresh_scene``), so it is the same whichever
     worker records it and whatever that worker recorded before. The last
@@ -207,8 +207,7 @@ def demo_video_frames(
         suite, task, demo_seed, render_every=render_every, env=env, fresh_scene=True
     )
     assert frames is not None
-    index = np.linspace(0, len(frames) - 1, min(count, len(frames))).round().astype(int)
-    video = frames[index]
+    video = frames[demo_frame_indices(len(frames) - 1, count)]
     _DEMO_VIDEOS[key] = video
     while len(_DEMO_VIDEOS) > DEMO_VIDEO_CACHE_SIZE:
         _DEMO_VIDEOS.popitem(last=False)

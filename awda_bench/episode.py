@@ -82,6 +82,15 @@ class WristDepth:
     z forward)."""
 
 
+def demo_frame_indices(steps: int, count: int) -> np.ndarray:
+    """``count`` indices over 0..steps, first and last included; a demo shorter than ``count``
+    repeats frames. The one rule for which frames of a demonstration a network sees: training
+    (over a recorded episode's states) and evaluation (over its rendered video) both use it, so a
+    short demo gives ``count`` frames at both (it gave fewer at evaluation before session 17:
+    MOSAIC's "door 1 close" has demos of 9 rendered frames)."""
+    return np.linspace(0, steps, count).round().astype(np.int64)
+
+
 @runtime_checkable
 class Observations(Protocol):
     """What an observation-only policy may see of its episode (the harness's implementation is
@@ -94,7 +103,8 @@ class Observations(Protocol):
     def demo_frames(self, count: int = 10) -> np.ndarray:
         """The demonstration: ``(count, 240, 320, 3)`` uint8 RGB frames of the demonstrator (the
         blue floating Panda hand) doing this task in another layout of the scene (``spec.demo_seed``),
-        evenly spaced over its video, first and last included; from the same third-person camera."""
+        evenly spaced over its video, first and last included (:func:`demo_frame_indices`; a
+        short video repeats frames); from the same third-person camera."""
 
     def first_frame(self) -> np.ndarray:
         """The agent's third-person RGB frame at reset, ``(240, 320, 3)`` uint8 (env 0)."""

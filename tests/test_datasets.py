@@ -19,10 +19,10 @@ from awda_bench.data.datasets import (
     CollectedData,
     Selection,
     TosviDataset,
-    demo_frame_indices,
     resample_trajectory,
 )
 from awda_bench.data.info import contact_sheet, dataset_info
+from awda_bench.episode import demo_frame_indices
 from awda_bench.errors import UsageError
 
 
@@ -31,6 +31,11 @@ def test_demo_frame_indices_include_first_and_last() -> None:
     idx = demo_frame_indices(57, 10)
     assert idx[0] == 0 and idx[-1] == 57 and len(idx) == 10
     assert np.all(np.diff(idx) > 0)
+    # a demo shorter than the frames asked for repeats frames: always ``count`` of them (MOSAIC's
+    # "door 1 close" renders 9 demo frames; evaluation gave the network 9 and it refused)
+    short = demo_frame_indices(8, 10)
+    assert len(short) == 10 and short[0] == 0 and short[-1] == 8
+    assert np.all(np.diff(short) >= 0) and set(short) == set(range(9))
 
 
 def test_resample_trajectory_keeps_ends_and_flags() -> None:

@@ -54,6 +54,7 @@ import torch
 from awda_bench.data.collect import MANIFEST
 from awda_bench.data.config import ROLE_AGENT, ROLE_DEMONSTRATOR, ROLE_SYNTHESIZED
 from awda_bench.data.trajectory_file import decode_jpeg, load_unit_json
+from awda_bench.episode import demo_frame_indices
 from awda_bench.errors import CorruptFileError, UsageError
 from awda_bench.models.agent_cameras import CameraMatrices, camera_index
 
@@ -239,11 +240,6 @@ def frames_tensor(frames: np.ndarray, size: tuple[int, int] | None) -> torch.Ten
             [cv2.resize(f, (size[1], size[0]), interpolation=cv2.INTER_AREA) for f in frames]
         )
     return torch.from_numpy(np.ascontiguousarray(frames)).permute(0, 3, 1, 2).float() / 255.0
-
-
-def demo_frame_indices(steps: int, count: int) -> np.ndarray:
-    """``count`` state indices over 0..steps, first and last included."""
-    return np.linspace(0, steps, count).round().astype(np.int64)
 
 
 def resample_trajectory(tcp: np.ndarray, attributes: np.ndarray, points: int) -> np.ndarray:

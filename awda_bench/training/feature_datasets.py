@@ -27,12 +27,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from awda_bench.data.datasets import (
-    AwdaPairDataset,
-    EpisodeRef,
-    TosviDataset,
-    demo_frame_indices,
-)
+from awda_bench.data.datasets import AwdaPairDataset, EpisodeRef, TosviDataset
+from awda_bench.episode import demo_frame_indices
 from awda_bench.training.feature_cache import FeatureCache, episode_name
 
 
