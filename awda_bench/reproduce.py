@@ -722,14 +722,16 @@ def run_stages(
     killed and resumed. Stopping this process (Ctrl-C, SIGTERM, SIGHUP) stops the running stage
     and its workers too, records the attempt as interrupted and raises :class:`RunInterrupted`;
     a failing stage raises :class:`UsageError`. ``command`` prefixes each stage's ``argv``.
-    Returns this invocation's attempts."""
+    After each stage it prints :func:`pace_line` (its time beside the plan's, and the rest re-timed
+    at this run's pace). Returns this invocation's attempts."""
     with _exclusive(config.out):
         log = read_stage_times(config.out)
         for attempt in log:
             if attempt.outcome == "running":  # its invocation died without a word (SIGKILL)
                 attempt.outcome = "killed"
         mine: list[StageAttempt] = []
-        for stage in stages:
+        paced: list[tuple[float, float]] = []  # (planned, actual) of the stages finished here
+        for index, stage in enumerate(stages):
             if stage.done:
                 print(f"[reproduce] {stage.name}: done, skipped", flush=True)
                 continue
@@ -769,8 +771,27 @@ def run_stages(
                     f"stage {stage.name!r} exited {code} after {attempt.wall_s:.0f} s; fix what it "
                     "printed and re-run the same reproduce command (finished stages are skipped)"
                 )
-            print(f"[reproduce] {stage.name}: {attempt.wall_s:.0f} s", flush=True)
+            paced.append((stage.estimate_s, attempt.wall_s))
+            left = sum(s.estimate_s for s in stages[index + 1 :] if not s.done)
+            print(f"[reproduce] {stage.name}: {pace_line(paced, left)}", flush=True)
         return mine
+
+
+def pace_line(paced: list[tuple[float, float]], left_s: float) -> str:
+    """The line ``reproduce`` prints after a stage: its wall time beside its plan, and what is left
+    at the plan's figures and at this invocation's pace so far (actual / planned over the stages
+    it finished: the plan's costs are one 2-core machine's, and machines differ). ``paced`` holds
+    ``(planned_s, actual_s)`` of the finished stages, the last one being the stage just done."""
+    planned, actual = paced[-1]
+    line = f"{actual:.0f} s (planned ~{_clock(planned)})"
+    if left_s <= 0.0:
+        return line
+    line += f"; left: ~{_clock(left_s)} at the plan's figures"
+    plan_sum = sum(p for p, _ in paced)
+    if plan_sum > 0.0:
+        pace = sum(a for _, a in paced) / plan_sum
+        line += f", ~{_clock(left_s * pace)} at this run's pace so far ({pace:.2f}x the plan)"
+    return line
 
 
 PAPER_SCALE = {

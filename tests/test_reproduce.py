@@ -24,6 +24,7 @@ from awda_bench.reproduce import (
     ReproduceConfig,
     Stage,
     StageAttempt,
+    pace_line,
     parse_columns,
     plan_stages,
     read_stage_times,
@@ -295,6 +296,30 @@ def test_stage_times_add_up_over_invocations_and_name_the_failure(tmp_path: Path
     assert [(a.stage, a.outcome) for a in mine] == [("train full-1", "finished")]
     totals = {name: (n, last) for name, _, n, last in stage_totals(read_stage_times(tmp_path))}
     assert totals == {"collect train": (1, "finished"), "train full-1": (2, "finished")}
+
+
+def test_each_stage_reports_its_time_beside_the_plan_and_the_rest_at_this_runs_pace(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    # a stage that took twice its plan: the 2 h left read as ~4 h at this pace
+    assert pace_line([(600.0, 1200.0)], 7200.0) == (
+        "1200 s (planned ~10 min); left: ~2 h 00 min at the plan's figures, "
+        "~4 h 00 min at this run's pace so far (2.00x the plan)"
+    )
+    # the pace is over every stage finished so far, not the last one alone
+    assert "(1.50x the plan)" in pace_line([(600.0, 1200.0), (600.0, 600.0)], 60.0)
+    assert pace_line([(60.0, 30.0)], 0.0) == "30 s (planned ~1 min)"  # nothing left
+    assert "at the plan's figures" in pace_line([(0.0, 5.0)], 60.0)  # no pace from 0 planned
+    assert "pace" not in pace_line([(0.0, 5.0)], 60.0)
+    config = ReproduceConfig(suite="pick_place", out=tmp_path)
+    first = Stage(name="collect train", argv=["pass"], estimate_s=600.0, done=False)
+    skipped = Stage(name="collect test", argv=["pass"], estimate_s=60.0, done=True)
+    last = Stage(name="train full-1", argv=["pass"], estimate_s=1200.0, done=False)
+    run_stages(config, [first, skipped, last], command=PYTHON_C)
+    out = capsys.readouterr().out
+    # after the first stage: only the train stage is left (the finished one is not counted)
+    assert "[reproduce] collect train: 0 s (planned ~10 min); left: ~20 min at the plan's" in out
+    assert "[reproduce] train full-1: 0 s (planned ~20 min)\n" in out
 
 
 def test_a_running_attempt_left_by_a_killed_invocation_is_marked_killed(tmp_path: Path) -> None:
