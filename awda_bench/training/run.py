@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -44,6 +45,7 @@ from awda_bench.models.config import (
     TrunkConfig,
     config_to_dict,
 )
+from awda_bench.models.denormals import denormals_flushed
 from awda_bench.models.frame_encoder import frozen_encoder
 from awda_bench.models.tosvi_net import TosviNet, pool_feature_maps
 from awda_bench.training.augment import BatchTreatment
@@ -435,7 +437,20 @@ def _write_json(path: Path, payload: dict[str, Any]) -> None:
 
 # ----------------------------------------------------------------------------- the run
 def run_training(request: TrainRequest) -> TrainOutcome:
-    """Train one column (module docstring); returns what was done."""
+    """Train one column (module docstring); returns what was done. Denormal floats are flushed
+    to zero throughout (:mod:`awda_bench.models.denormals`: without it a T-OSVI step slows ~3x
+    as training goes on)."""
+    with denormals_flushed() as flushing:  # first: torch's threads inherit it when they start
+        if not flushing:
+            print(
+                "warning: denormal floats are not flushed to zero on every torch thread (its "
+                "threads were running before train began); training slows as they appear",
+                file=sys.stderr,
+            )
+        return _run_training(request)
+
+
+def _run_training(request: TrainRequest) -> TrainOutcome:
     column = column_for(request.method, request.ablation)
     recipe = load_recipe(request.recipe).with_schedule(request.steps, request.snapshot_every)
     device = resolve_device(request.device)
