@@ -158,15 +158,16 @@ class Costs:
     0.28 s a step on the idle machine in pick_place-small-v4 and -v7, plus ~0.01 s of data;
     0.49-0.65 s beside another job, -v5; batch 16, 2 threads)."""
     frozen_tosvi_step_s: dict[str, float] = field(
-        default_factory=lambda: {"tosvi": 1.4, "tosvi-depth": 2.8}
+        default_factory=lambda: {"tosvi": 0.8, "tosvi-depth": 1.6}
     )
-    """Per T-OSVI step over cached maps pooled 2x2 (``small``: batch 16, 2 threads): the median
-    compute of a real run's steps on the idle machine, 1.39 s (MOSAIC drawer, steps 601-640,
-    2026-12-03; pick-place's v6 run: 1.31 s median, partly beside helper sessions). A synthetic
-    batch had given 0.6 s (session 12), which the plan printed until session 17 and which made
-    its T-OSVI estimates ~2.3x too short. tosvi-depth (which trains its depth ResNet-18 over 96
-    wrist depth images a step) is not measured since the attention fix: it is scaled by the ratio
-    measured before it (10.7 s vs 5.3 s at 1 thread beside a 2-thread job)."""
+    """Per T-OSVI step over cached maps pooled 2x2 (``small``: batch 16, 2 threads), with
+    ``train``'s denormal flush (:mod:`awda_bench.models.denormals`): the median compute of a real
+    run's steps on the idle machine, 0.77 s + 0.01 s of data (pick-place v8, steps 1401-3000,
+    2026-12-03). Without the flush a step grew with training (0.9 -> 3.1 s over v8's first 600
+    steps; the 1.4 s this plan used before came from such runs). tosvi-depth (which trains its
+    depth ResNet-18 over 96 wrist depth images a step) is not measured since the attention fix:
+    it is scaled by the ratio measured before it (10.7 s vs 5.3 s at 1 thread beside a 2-thread
+    job)."""
     agent_episode_steps: float = 62.4
     """Mean steps of a kept pick-place agent episode (T-OSVI caches every agent frame; the
     20-per-task train split: 17,472 steps in 280 episodes)."""
