@@ -1,10 +1,17 @@
+import dataclasses
+import json
 from pathlib import Path
 
 import pytest
 from harness_fakes import write_fake_suite
 
 from awda_bench.errors import UsageError
-from awda_bench.harness.episode_specs import build_episode_specs, derive_seed, make_protocol
+from awda_bench.harness.episode_specs import (
+    build_episode_specs,
+    derive_seed,
+    make_protocol,
+    protocol_drift,
+)
 from awda_bench.suites import load_suite
 
 
@@ -62,3 +69,27 @@ def test_bad_values_are_usage_errors(suite) -> None:
         make_protocol(suite, episodes=0, base_seed=0)
     with pytest.raises(UsageError, match="--seed"):
         make_protocol(suite, episodes=1, base_seed=-1)
+
+
+def _recorded(protocol) -> dict:
+    """A protocol as a report's summary.json records it."""
+    return {**json.loads(protocol.to_json()), "fingerprint": protocol.fingerprint}
+
+
+def test_protocol_drift_names_what_today_would_make_differently(tmp_path: Path, suite) -> None:
+    protocol = make_protocol(suite, episodes=4, base_seed=0)
+    assert protocol_drift(_recorded(protocol), tmp_path) == []
+    # an older harness version, recorded consistently
+    old = dataclasses.replace(protocol, protocol_version=protocol.protocol_version - 1)
+    assert protocol_drift(_recorded(old), tmp_path) == [
+        f"protocol v{old.protocol_version}, today v{protocol.protocol_version}"
+    ]
+    # a definition edited after the fact no longer hashes to its fingerprint
+    edited = {**_recorded(protocol), "episodes": 5}
+    assert protocol_drift(edited, tmp_path) == ["fingerprint does not match its definition"]
+    # any byte of the suite file
+    suite.path.write_text(suite.path.read_text() + "\n# comment\n")
+    assert protocol_drift(_recorded(protocol), tmp_path) == ["suite file changed"]
+    suite.path.unlink()
+    assert protocol_drift(_recorded(protocol), tmp_path) == ["suite 'fake' gone"]
+    assert protocol_drift({"suite": "fake"}, tmp_path)[0].startswith("not a protocol definition")

@@ -4,6 +4,7 @@ bootstrap CI (bootstrap_ci.py), the index (results_index.py) and the paper's val
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -453,3 +454,23 @@ def test_the_metaworld_rows_group_the_held_out_tasks_by_their_published_difficul
     tosvi = page.s3_metaworld.loc["T-OSVI [1] (`tosvi`)"]
     assert (tosvi["ours: Meta-World [all]"], tosvi["note"]) == (NOT_RUN, NOT_TRAINED)
     assert "[hard] = medium, hard, very_hard" in page.markdown()
+
+
+def test_sources_say_whether_todays_code_makes_their_protocol(reports: Path) -> None:
+    from awda_bench.harness.episode_specs import make_protocol
+    from awda_bench.suites import load_suite
+
+    today = make_protocol(load_suite("pick_place"), episodes=20, base_seed=0)
+    older = dataclasses.replace(today, protocol_version=today.protocol_version - 1)
+    for directory, protocol in ((reports / "learned" / "pp", today), (reports, older)):
+        summary = json.loads((directory / "summary.json").read_text())
+        recorded = {**json.loads(protocol.to_json()), "fingerprint": protocol.fingerprint}
+        summary["protocols"] = {"pick_place": recorded}
+        (directory / "summary.json").write_text(json.dumps(summary))
+    sources = build_results_page(reports / "results_sources.toml").sources["protocol"]
+    assert sources.iloc[0] == f"pick_place `{today.fingerprint}` (today's)"
+    assert sources.iloc[1] == (
+        f"mosaic: not recorded; pick_place `{older.fingerprint}` "
+        f"(**differs: protocol v{older.protocol_version}, today v{today.protocol_version}**)"
+    )
+    assert sources.iloc[2] == "mosaic: not recorded"

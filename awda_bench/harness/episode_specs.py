@@ -13,11 +13,14 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import asdict, dataclass
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any
 
 from awda_bench.episode import EpisodeSpec
 from awda_bench.errors import UnknownChoiceError, UsageError
-from awda_bench.suites import Suite
+from awda_bench.suites import SUITES_DIR, Suite, load_suite
 
 PROTOCOL_VERSION = 2
 """Bumped whenever the harness changes how an episode is played or judged.
@@ -93,6 +96,37 @@ def make_protocol(
         episode_unit=unit,
         base_seed=base_seed,
     )
+
+
+def protocol_drift(stored: Mapping[str, Any], suites_dir: Path = SUITES_DIR) -> list[str]:
+    """What separates a recorded protocol (a report's ``summary.json`` ``protocols`` entry: its
+    definition and ``fingerprint``) from the one today's code makes with the same settings; empty
+    when they are the same protocol.
+
+    Checked: the definition still hashes to its recorded fingerprint (else ``"fingerprint does not
+    match its definition"``), the suite file's bytes (``"suite file changed"``, ``"suite gone"``)
+    and the harness's :data:`PROTOCOL_VERSION` (``"protocol v1, today v2"``).
+    """
+    names = {f.name for f in fields(EvalProtocol)}
+    definition: dict[str, Any] = {k: v for k, v in stored.items() if k in names}
+    if "eval_tasks" in definition:
+        definition["eval_tasks"] = tuple(definition["eval_tasks"])
+    try:
+        recorded = EvalProtocol(**definition)
+    except TypeError as exc:
+        return [f"not a protocol definition ({exc})"]
+    drift = []
+    if recorded.fingerprint != stored.get("fingerprint"):
+        drift.append("fingerprint does not match its definition")
+    try:
+        suite = load_suite(recorded.suite, suites_dir)
+    except UsageError:
+        return [*drift, f"suite {recorded.suite!r} gone"]
+    if hashlib.sha256(suite.path.read_bytes()).hexdigest() != recorded.suite_sha256:
+        drift.append("suite file changed")
+    if recorded.protocol_version != PROTOCOL_VERSION:
+        drift.append(f"protocol v{recorded.protocol_version}, today v{PROTOCOL_VERSION}")
+    return drift
 
 
 def derive_seed(suite: str, base_seed: int, task: int, episode: int, role: str) -> int:

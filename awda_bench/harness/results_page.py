@@ -21,6 +21,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -28,6 +29,7 @@ import pandas as pd
 from awda_bench.errors import CorruptFileError, UsageError
 from awda_bench.harness import bootstrap_ci, tables
 from awda_bench.harness.aggregate import ALL, S4_FAMILIES, Cell, family_key
+from awda_bench.harness.episode_specs import PROTOCOL_VERSION, protocol_drift
 from awda_bench.harness.methods import get_method
 from awda_bench.harness.paper_values import (
     NO_COUNTERPART,
@@ -101,6 +103,8 @@ class ReportDir:
     """per_snapshot.csv."""
     grasp: pd.DataFrame = field(repr=False)
     """grasp.csv."""
+    protocols: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """summary.json's evaluation protocols by suite (definition and fingerprint)."""
 
 
 def read_report_dir(directory: Path, where: str) -> ReportDir:
@@ -120,6 +124,7 @@ def read_report_dir(directory: Path, where: str) -> ReportDir:
         summary = json.loads((directory / "summary.json").read_text())
         cells = {(c["suite"], c["group"], c["method"]): Cell(**c) for c in summary["cells"]}
         metric = str(summary["metric"])
+        protocols = {str(k): dict(v) for k, v in summary.get("protocols", {}).items()}
     except (json.JSONDecodeError, KeyError, TypeError) as exc:
         raise CorruptFileError(
             f"{where}: {directory / 'summary.json'} is not a report summary ({exc}); "
@@ -131,6 +136,7 @@ def read_report_dir(directory: Path, where: str) -> ReportDir:
         cells=cells,
         per_snapshot=pd.read_csv(directory / "per_snapshot.csv"),
         grasp=pd.read_csv(directory / "grasp.csv"),
+        protocols=protocols,
     )
 
 
@@ -314,6 +320,21 @@ RATE_TOLERANCE = 1e-9
 """How far rates may break success <= grasped <= reached (float round-off)."""
 
 
+def protocol_text(report: ReportDir, suites: Sequence[str]) -> str:
+    """A source's evaluation protocol per suite: its fingerprint and whether today's code makes the
+    same one (:func:`~awda_bench.harness.episode_specs.protocol_drift`)."""
+    parts = []
+    for suite in suites:
+        stored = report.protocols.get(suite)
+        if stored is None:
+            parts.append(f"{suite}: not recorded")
+            continue
+        drift = protocol_drift({**stored, "suite": stored.get("suite", suite)})
+        state = "today's" if not drift else "**differs: " + "; ".join(drift) + "**"
+        parts.append(f"{suite} `{stored.get('fingerprint')}` ({state})")
+    return "; ".join(parts)
+
+
 def failure_split(reached: float, grasped: float, success: float) -> FailureSplit | None:
     """:class:`FailureSplit` from the three rates (fractions of the same episodes); ``None`` when
     no episode reached the object. Rates that break success <= grasped <= reached raise
@@ -376,6 +397,11 @@ class ResultsPage:
             f"- **{NOT_RUN}**: no source for the cell; its note says why.",
             f"- **{SOURCE}**: the report directory (relative to this page) and the method label "
             "in it; how to regenerate each directory is under Sources.",
+            "- **protocol** (Sources): each source's evaluation-protocol fingerprint (suite file "
+            "bytes, horizon, evaluated tasks, episodes, seed, harness version), marked *today's* "
+            "when the committed suite files and harness (protocol "
+            f"v{PROTOCOL_VERSION}) make the same protocol, so a run made now is comparable; "
+            "otherwise what differs.",
             "",
             "## Table S3: success on held-out tasks",
             "",
@@ -771,8 +797,13 @@ class _Builder:
                 notes = [n for n in ("README.md", "reproduce.md") if (directory / n).is_file()]
                 readme = f"{source}/{notes[0]}".removeprefix("./") if notes else "README.md"
                 how = f"see [{readme}]({readme})"
+            report = self.report(entries[0])
             rows.append(
-                {"cells": ", ".join(f"{e.name} (`{e.label}`)" for e in entries), "regenerate": how}
+                {
+                    "cells": ", ".join(f"{e.name} (`{e.label}`)" for e in entries),
+                    "protocol": protocol_text(report, sorted({e.suite for e in entries})),
+                    "regenerate": how,
+                }
             )
             index.append(f"[{'reports/' if source == '.' else source + '/'}]({source}/)")
         return pd.DataFrame(rows, index=pd.Index(index, name="source"))
