@@ -474,3 +474,16 @@ def test_sources_say_whether_todays_code_makes_their_protocol(reports: Path) -> 
         f"(**differs: protocol v{older.protocol_version}, today v{today.protocol_version}**)"
     )
     assert sources.iloc[2] == "mosaic: not recorded"
+
+
+def test_the_committed_page_is_what_its_index_and_sources_make() -> None:
+    """reports/RESULTS.md is generated, never typed: regenerating it from the committed index and
+    report directories (and today's suite files, which its protocol column checks) gives it back."""
+    from awda_bench.harness.results_page import DEFAULT_INDEX
+
+    root = Path(__file__).resolve().parent.parent
+    index = root / DEFAULT_INDEX
+    committed = (index.parent / PAGE_NAME).read_text()
+    assert build_results_page(index).markdown() == committed, (
+        "reports/RESULTS.md is stale: run `python -m awda_bench report --results-page`"
+    )
