@@ -24,6 +24,7 @@ Example file (``tasks/pick_place.toml``)::
 
 from __future__ import annotations
 
+import hashlib
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -114,6 +115,10 @@ class Suite:
     def horizon_s(self) -> float:
         """Episode length [s]."""
         return self.horizon_steps / self.control_freq_hz
+
+    def file_sha256(self) -> str:
+        """SHA-256 of the suite file's bytes (recorded by evaluation protocols and collections)."""
+        return hashlib.sha256(self.path.read_bytes()).hexdigest()
 
     def env_id_for(self, task: int) -> str:
         """The env id serving suite task ``task``."""

@@ -239,7 +239,7 @@ def make_plan(config: CollectConfig) -> CollectPlan:
     definition = {
         "format_version": FORMAT_VERSION,
         "suite": suite.name,
-        "suite_sha256": hashlib.sha256(suite.path.read_bytes()).hexdigest(),
+        "suite_sha256": suite.file_sha256(),
         "split": config.split,
         "roles": sorted({u.role for u in units}),
         "tasks": [t.index for t in tasks],

@@ -69,11 +69,6 @@ EVAL_SPLITS: tuple[str, ...] = ("test", "train")
 fingerprint, so the two never mix in one cell."""
 
 
-def suite_file_sha256(suite: Suite) -> str:
-    """SHA-256 of the suite file's bytes (what :attr:`EvalProtocol.suite_sha256` records)."""
-    return hashlib.sha256(suite.path.read_bytes()).hexdigest()
-
-
 def make_protocol(
     suite: Suite, *, episodes: int | None, base_seed: int, split: str = "test"
 ) -> EvalProtocol:
@@ -92,7 +87,7 @@ def make_protocol(
         )
     return EvalProtocol(
         suite=suite.name,
-        suite_sha256=suite_file_sha256(suite),
+        suite_sha256=suite.file_sha256(),
         horizon_steps=suite.horizon_steps,
         eval_tasks=tuple(
             t.index for t in (suite.eval_tasks if split == "test" else suite.train_tasks)
@@ -127,7 +122,7 @@ def protocol_drift(stored: Mapping[str, Any], suites_dir: Path = SUITES_DIR) -> 
         suite = load_suite(recorded.suite, suites_dir)
     except UsageError:
         return [*drift, f"suite {recorded.suite!r} gone"]
-    if suite_file_sha256(suite) != recorded.suite_sha256:
+    if suite.file_sha256() != recorded.suite_sha256:
         drift.append("suite file changed")
     if recorded.protocol_version != PROTOCOL_VERSION:
         drift.append(f"protocol v{recorded.protocol_version}, today v{PROTOCOL_VERSION}")
