@@ -119,8 +119,92 @@ def test_cache_keys_change_with_trunk_stage_and_size() -> None:
         cache_meta("abc", replace(LITE0, image_height_px=96)),
         cache_meta("abc", replace(LITE0, backbone="resnet18", backbone_stride=32)),
         cache_meta("abc", LITE0, variant="depth"),
+        cache_meta("abc", replace(LITE0, finetune_top_blocks=1)),
     ]
-    assert len({base, *(cache_key(m) for m in others)}) == 6
+    assert len({base, *(cache_key(m) for m in others)}) == 7
+
+
+def test_bottom_then_top_is_the_stage_and_top_counts_are_checked() -> None:
+    from awda_bench.models.config import TosviConfig
+    from awda_bench.models.efficientnet_lite import EfficientNetLiteFeatures
+
+    torch.manual_seed(0)
+    encoder = EfficientNetLiteFeatures(16, pretrained=False).eval()
+    x = torch.rand(2, 3, 64, 80)
+    with torch.no_grad():
+        whole = encoder(x)
+        for n, channels in ((0, 112), (1, 112), (3, 80), (10, 16), (11, 32)):
+            below = encoder.bottom(x, n)
+            assert below.shape[1] == channels
+            torch.testing.assert_close(encoder.top(below, n), whole)
+    with pytest.raises(UsageError, match="has 11 blocks"):
+        encoder.bottom(x, 12)
+    with pytest.raises(UsageError, match="finetune_top_blocks"):
+        TrunkConfig(backbone="efficientnet-lite0", backbone_stride=16, finetune_top_blocks=1)
+    with pytest.raises(UsageError, match="finetune_top_blocks"):
+        TosviConfig(trunk=replace(LITE0, finetune_top_blocks=1))
+
+
+def test_fine_tuned_top_blocks_train_over_cached_maps_and_nothing_else_of_the_trunk(
+    tmp_path: Path,
+) -> None:
+    """With ``finetune_top_blocks = 1`` the cache holds the map entering the stage's last block:
+    the loss over those maps equals the loss over the images, training moves that block's weights
+    only (batch-norm statistics stay), and a snapshot rebuilds the trained block."""
+    from awda_bench.models.config import TrainConfig
+    from awda_bench.models.frame_encoder import frozen_encoder
+    from awda_bench.training.loop import train
+
+    trunk = replace(LITE0, finetune_top_blocks=1)
+    torch.manual_seed(0)
+    model = AwdaNet(AwdaConfig(trunk=trunk)).train()
+    backbone = model.trunk.backbone
+    top = {id(p) for p in backbone.top_parameters(1)}
+    trainable = [p for p in backbone.parameters() if p.requires_grad]
+    assert top and {id(p) for p in trainable} == top
+    encode = frozen_encoder(trunk)  # what the feature cache stores
+    g = torch.Generator().manual_seed(1)
+    images = [
+        {
+            "demo": torch.rand(10, 3, 64, 80, generator=g),
+            "first_frame": torch.rand(3, 64, 80, generator=g),
+            "trajectory": torch.rand(50, 4, generator=g),
+            "head": torch.tensor(i % 2),
+        }
+        for i in range(4)
+    ]
+    cached = []
+    for sample in images:
+        with torch.no_grad():
+            maps = encode(torch.cat((sample["demo"], sample["first_frame"][None])))
+        assert maps.shape[1:] == (112, 4, 5)  # the last block keeps the stage's channels
+        cached.append(
+            {
+                "demo_features": maps[:-1],
+                "first_frame_features": maps[-1],
+                "trajectory": sample["trajectory"],
+                "head": sample["head"],
+            }
+        )
+    model.eval()
+
+    def batch(samples: list[dict[str, torch.Tensor]]) -> dict[str, torch.Tensor]:
+        return {k: torch.stack([s[k] for s in samples]) for k in samples[0]}
+
+    with torch.no_grad():
+        from_images, _ = model.compute_loss(batch(images[:2]))
+        from_cache, _ = model.compute_loss(batch(cached[:2]))
+    torch.testing.assert_close(from_cache, from_images, rtol=1e-4, atol=1e-5)
+    before = {k: v.clone() for k, v in backbone.state_dict().items()}
+    config = TrainConfig(batch_size=2, max_steps=2, snapshot_every_steps=2, device="cpu")
+    train(model, cached, config, tmp_path)
+    after = backbone.state_dict()
+    top_names = {n for n, p in backbone.named_parameters() if id(p) in top}
+    moved = {k for k in before if not torch.equal(before[k], after[k])}
+    assert moved and moved <= top_names  # no running statistic, no frozen weight
+    rebuilt = load_snapshot(list_snapshots(tmp_path)[-1]).build_model()
+    for name in top_names:
+        torch.testing.assert_close(rebuilt.trunk.backbone.state_dict()[name], after[name])
 
 
 # ----------------------------------------------------------------------------- tiny collection

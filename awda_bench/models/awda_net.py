@@ -16,7 +16,8 @@ Batch format (what a dataset's samples stack into; images RGB float in [0, 1], c
                                    it (demonstrator and agent of a pair share the scene camera)
 
 With a frozen backbone, training batches carry its cached feature maps instead of the images:
-``"demo_features" (B, demo_frames, C, h, w)`` and ``"first_frame_features" (B, C, h, w)``.
+``"demo_features" (B, demo_frames, C, h, w)`` and ``"first_frame_features" (B, C, h, w)`` (with
+``trunk.finetune_top_blocks`` the maps entering those blocks, which the loss then runs).
 
 Output coordinate convention: waypoints live in whatever frame the ``trajectory`` targets are given
 in; this project's datasets use the ManiSkill **world frame, metres**, TCP position
@@ -107,6 +108,13 @@ class AwdaNet(nn.Module):
         """``demo (B, Td, 3, H, W)``, ``first_frame (B, 3, H, W)``, ``head (B,)`` (and
         ``camera (B,)``, each sample's camera index; ``None``: the first) -> raw waypoints
         ``(B, 15, 3 + k)`` (xyz [m], attribute logits), sets flat in order 1..5."""
+        self._check_images(demo, first_frame)
+        frames = torch.cat((demo, first_frame.unsqueeze(1)), dim=1)
+        features = self.trunk.frame_features(frames)
+        return self.forward_features(features[:, :-1], features[:, -1], head, camera)
+
+    def _check_images(self, demo: torch.Tensor, first_frame: torch.Tensor) -> None:
+        """One-line errors for image batches of the wrong rank, frame count or size."""
         cfg = self.config
         if demo.dim() != 5 or first_frame.dim() != 4 or demo.shape[1] != cfg.trunk.demo_frames:
             raise UsageError(
@@ -119,9 +127,18 @@ class AwdaNet(nn.Module):
                 f"images must be {size[0]}x{size[1]} (config trunk.image_height_px/width_px); "
                 f"got demo {tuple(demo.shape[-2:])}, first frame {tuple(first_frame.shape[-2:])}"
             )
-        frames = torch.cat((demo, first_frame.unsqueeze(1)), dim=1)
-        features = self.trunk.frame_features(frames)
-        return self.forward_features(features[:, :-1], features[:, -1], head, camera)
+
+    def cached_maps(
+        self, demo: torch.Tensor, first_frame: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """A feature cache's maps ``demo (B, Td, C', h, w)``, ``first_frame (B, C', h, w)`` ->
+        the backbone's: through the fine-tuned top blocks (``trunk.finetune_top_blocks``), else
+        as they are (the cache then holds the stage's map itself)."""
+        if not self.trunk.top_blocks:
+            return demo, first_frame
+        td = demo.shape[1]
+        features = self.trunk.top(torch.cat((demo, first_frame.unsqueeze(1)), dim=1))
+        return features[:, :td], features[:, td]
 
     def camera_indices(self, camera: torch.Tensor | None, b: int) -> torch.Tensor | None:
         """``camera`` checked against the config's cameras (``None`` stays ``None``)."""
@@ -166,21 +183,18 @@ class AwdaNet(nn.Module):
         cfg = self.config
         pointed: PointerOutput | None = None
         camera = self.camera_indices(batch.get("camera"), len(batch["trajectory"]))
+        if "demo_features" in batch:  # a frozen backbone's cached maps
+            demo, first = self.cached_maps(batch["demo_features"], batch["first_frame_features"])
+        else:
+            self._check_images(batch["demo"], batch["first_frame"])
+            frames = torch.cat((batch["demo"], batch["first_frame"].unsqueeze(1)), dim=1)
+            features = self.trunk.frame_features(frames)
+            demo, first = features[:, :-1], features[:, -1]
         if cfg.identification_weight > 0.0 and isinstance(self.scene_head, DemoPointer):
-            if "demo_features" in batch:
-                demo, first = batch["demo_features"], batch["first_frame_features"]
-            else:
-                frames = torch.cat((batch["demo"], batch["first_frame"].unsqueeze(1)), dim=1)
-                features = self.trunk.frame_features(frames)
-                demo, first = features[:, :-1], features[:, -1]
             pointed = self.scene_head.pointer(demo, first, batch["head"].long(), camera)
             waypoints = pointed.waypoints
-        elif "demo_features" in batch:  # a frozen backbone's cached features
-            waypoints = self.forward_features(
-                batch["demo_features"], batch["first_frame_features"], batch["head"], camera
-            )
         else:
-            waypoints = self(batch["demo"], batch["first_frame"], batch["head"], camera)
+            waypoints = self.forward_features(demo, first, batch["head"], camera)
         loss, per_set = multi_waypoint_sdtw_loss(
             waypoints,
             batch["trajectory"],

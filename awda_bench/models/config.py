@@ -63,6 +63,11 @@ class TrunkConfig:
     freeze_backbone: bool = False
     """Keep the backbone's weights (and batch-norm statistics) fixed: no gradient, no optimizer
     state; training then reads its features from a cache (:mod:`awda_bench.training.feature_cache`)."""
+    finetune_top_blocks: int = 0
+    """With ``freeze_backbone`` and ``efficientnet-lite0``: the last N blocks up to the stage are
+    trained (their batch-norm statistics stay fixed, the backbone stays in eval mode), the blocks
+    before them frozen; a feature cache then holds the map entering those N blocks. 0: all frozen.
+    Stride 16 has 11 blocks, its last group 3 (112 channels at 15x20 cells for 240x320)."""
     backbone_weights: str = "imagenet"
     """``imagenet`` (resnet18: torchvision's IMAGENET1K_V1, which needs the network or a warm
     torch hub cache; efficientnet-lite0: the installed package's weights), ``none`` (random init)
@@ -117,6 +122,18 @@ class TrunkConfig:
             "backbone_weights",
             self.backbone_weights,
             f"one of {BACKBONE_WEIGHT_CHOICES} for {self.backbone}",
+        )
+        _check(
+            self.finetune_top_blocks == 0
+            or (
+                self.finetune_top_blocks > 0
+                and self.freeze_backbone
+                and self.backbone == "efficientnet-lite0"
+            ),
+            o,
+            "finetune_top_blocks",
+            self.finetune_top_blocks,
+            "0, or > 0 with freeze_backbone = true and backbone efficientnet-lite0",
         )
         _check(self.head in HEAD_CHOICES, o, "head", self.head, f"one of {HEAD_CHOICES}")
         _check(
@@ -281,6 +298,14 @@ class TosviConfig:
 
     def __post_init__(self) -> None:
         o = "TosviConfig"
+        _check(
+            self.trunk.finetune_top_blocks == 0,
+            o,
+            "trunk.finetune_top_blocks",
+            self.trunk.finetune_top_blocks,
+            "0 (T-OSVI trains over its pooled frozen features; fine-tuned top blocks are AWDA's "
+            "recipe variant only)",
+        )
         _check(self.frame_stack >= 1, o, "frame_stack", self.frame_stack, "an int >= 1")
         _check(self.action_dim >= 1, o, "action_dim", self.action_dim, "an int >= 1")
         _check(self.feature_pool >= 1, o, "feature_pool", self.feature_pool, "an int >= 1")

@@ -137,3 +137,48 @@ class EfficientNetLiteFeatures(nn.Module):
 
     def forward(self, images: torch.Tensor) -> torch.Tensor:
         return self.blocks(self.stem((images - INPUT_MEAN) / INPUT_STD))
+
+    def _flat_blocks(self) -> list[nn.Module]:
+        return [block for group in self.blocks.children() for block in group.children()]
+
+    def _split(self, top_blocks: int) -> int:
+        count = len(self._flat_blocks())
+        if not 0 <= top_blocks <= count:
+            raise UsageError(
+                f"efficientnet-lite0 up to stride {self.stride} has {count} blocks; cannot "
+                f"fine-tune the top {top_blocks} (use 0..{count})"
+            )
+        return count - top_blocks
+
+    def bottom(self, images: torch.Tensor, top_blocks: int) -> torch.Tensor:
+        """RGB in [0, 1] -> the map entering the last ``top_blocks`` blocks (what a trunk that
+        fine-tunes only those keeps frozen and caches); ``top(bottom(x, n), n) == forward(x)``."""
+        x = self.stem((images - INPUT_MEAN) / INPUT_STD)
+        for block in self._flat_blocks()[: self._split(top_blocks)]:
+            x = block(x)
+        return x
+
+    def top(self, features: torch.Tensor, top_blocks: int) -> torch.Tensor:
+        """:meth:`bottom`'s map -> the stage's map, through the last ``top_blocks`` blocks."""
+        for block in self._flat_blocks()[self._split(top_blocks) :]:
+            features = block(features)
+        return features
+
+    def top_parameters(self, top_blocks: int) -> list[nn.Parameter]:
+        """The weights of the last ``top_blocks`` blocks (batch-norm affine included)."""
+        blocks = self._flat_blocks()[self._split(top_blocks) :]
+        return [p for block in blocks for p in block.parameters()]
+
+
+class FrozenBottom(nn.Module):
+    """``encoder.bottom(x, top_blocks)`` as a module: a feature cache's encoder when a recipe
+    fine-tunes the top blocks."""
+
+    def __init__(self, encoder: EfficientNetLiteFeatures, top_blocks: int) -> None:
+        super().__init__()
+        encoder._split(top_blocks)  # refuses a count the stage does not have
+        self.encoder = encoder
+        self.top_blocks = top_blocks
+
+    def forward(self, images: torch.Tensor) -> torch.Tensor:
+        return self.encoder.bottom(images, self.top_blocks)

@@ -20,7 +20,7 @@ from torch import nn
 
 from awda_bench.models.backbone import FEATURE_CHANNELS, ImageNormalizer, build_resnet18_features
 from awda_bench.models.config import TrunkConfig
-from awda_bench.models.efficientnet_lite import EfficientNetLiteFeatures
+from awda_bench.models.efficientnet_lite import EfficientNetLiteFeatures, FrozenBottom
 
 
 def build_frame_encoder(
@@ -41,8 +41,12 @@ def frozen_encoder(config: TrunkConfig) -> nn.Module:
     without gradients: the features a frozen trunk gives, the same for every frame whatever else
     is in its batch. (In training mode batch norm would use each batch's statistics, and the
     features of a frame would depend on the frames encoded with it: a cache built so differs from
-    what evaluation computes by as much as the features themselves, measured in session 11.)"""
+    what evaluation computes by as much as the features themselves, measured in session 11.)
+    With ``finetune_top_blocks = n`` it stops before the last ``n`` blocks (those are trained)."""
     normalize, backbone, _ = build_frame_encoder(config, load_weights=True)
+    if config.finetune_top_blocks:
+        assert isinstance(backbone, EfficientNetLiteFeatures)  # TrunkConfig checks it
+        backbone = FrozenBottom(backbone, config.finetune_top_blocks)
     encoder = nn.Sequential(normalize, backbone).eval()
     encoder.requires_grad_(False)
     return encoder

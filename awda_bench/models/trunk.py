@@ -23,6 +23,7 @@ from torch import nn
 
 from awda_bench.models.attention import SelfAttention3d, SpaceTimePositionalEncoding, SpatialSoftmax
 from awda_bench.models.config import TrunkConfig
+from awda_bench.models.efficientnet_lite import EfficientNetLiteFeatures
 from awda_bench.models.frame_encoder import build_frame_encoder
 
 
@@ -40,6 +41,12 @@ class VisualTrunk(nn.Module):
         """Channels of the backbone's feature map."""
         if config.freeze_backbone:
             self.backbone.requires_grad_(False)
+        self.top_blocks = config.finetune_top_blocks
+        """Trained blocks at the top of a frozen backbone (0: none)."""
+        if self.top_blocks:
+            assert isinstance(self.backbone, EfficientNetLiteFeatures)  # TrunkConfig checks it
+            for parameter in self.backbone.top_parameters(self.top_blocks):
+                parameter.requires_grad_(True)
         if config.head == "self-attention":
             self.positional = SpaceTimePositionalEncoding()
             self.attention = nn.Sequential(
@@ -61,7 +68,8 @@ class VisualTrunk(nn.Module):
             )
 
     def train(self, mode: bool = True) -> VisualTrunk:
-        """A frozen backbone stays in eval mode (its batch-norm statistics are part of it)."""
+        """A frozen backbone stays in eval mode (its batch-norm statistics are part of it), its
+        fine-tuned top blocks included."""
         super().train(mode)
         if self.config.freeze_backbone:
             self.backbone.eval()
@@ -73,10 +81,29 @@ class VisualTrunk(nn.Module):
         flat = frames.reshape(b * t, *frames.shape[2:])
         if self.config.freeze_backbone:
             with torch.no_grad():
-                features = self.backbone(self.normalize(flat))
+                features = self.frozen_maps(self.normalize(flat))
+            features = self.top(features)
         else:
             features = self.backbone(self.normalize(flat))
         return features.reshape(b, t, *features.shape[1:])
+
+    def frozen_maps(self, images: torch.Tensor) -> torch.Tensor:
+        """A frozen backbone's part: normalized images ``(N, 3, H, W)`` -> the map a feature
+        cache holds (the stage's, or the one entering the fine-tuned top blocks)."""
+        if self.top_blocks:
+            assert isinstance(self.backbone, EfficientNetLiteFeatures)
+            return self.backbone.bottom(images, self.top_blocks)
+        return self.backbone(images)
+
+    def top(self, maps: torch.Tensor) -> torch.Tensor:
+        """:meth:`frozen_maps`' output (or a cache's) ``(..., C', h, w)`` -> the stage's map
+        ``(..., C, h, w)`` through the fine-tuned top blocks; without them, ``maps`` itself."""
+        if not self.top_blocks:
+            return maps
+        assert isinstance(self.backbone, EfficientNetLiteFeatures)
+        flat = maps.reshape(-1, *maps.shape[-3:])
+        out = self.backbone.top(flat, self.top_blocks)
+        return out.reshape(*maps.shape[:-3], *out.shape[1:])
 
     def temporal(self, features: torch.Tensor, last_frames: int | None = None) -> torch.Tensor:
         """``(B, T, C, h, w)`` -> per-frame vectors ``(B, T, feature_dim)`` (``self-attention``

@@ -9,7 +9,8 @@ snapshot carries, so training and evaluation see the same features.
 Where and what::
 
     DATA_DIR/features/<key>.h5      key = sha256(format version, collection fingerprint, backbone,
-                                                 stride, weights, image size, variant)[:16]
+                                                 stride, weights, image size, variant, and the
+                                                 fine-tuned top blocks when there are)[:16]
         attrs: key, meta (JSON of what the key hashes), complete (written last)
         <unit path>/<traj>/indices   (n,) int64           state indices encoded
         <unit path>/<traj>/features  (n, C, h, w) float16 the backbone's map of each, fletcher32
@@ -66,7 +67,7 @@ Encoder = Callable[[torch.Tensor], torch.Tensor]
 
 def cache_meta(fingerprint: str, trunk: TrunkConfig, variant: str = "rgb") -> dict[str, Any]:
     """What a cache's key is the hash of."""
-    return {
+    meta: dict[str, Any] = {
         "format": FORMAT_VERSION,
         "collection": fingerprint,
         "backbone": trunk.backbone,
@@ -75,6 +76,9 @@ def cache_meta(fingerprint: str, trunk: TrunkConfig, variant: str = "rgb") -> di
         "image_size": [trunk.image_height_px, trunk.image_width_px],
         "variant": variant,
     }
+    if trunk.finetune_top_blocks:  # the map entering the trained top blocks (absent: the stage's)
+        meta["top_blocks_trained"] = trunk.finetune_top_blocks
+    return meta
 
 
 def cache_key(meta: Mapping[str, Any]) -> str:

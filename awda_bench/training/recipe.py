@@ -14,7 +14,7 @@ Layout::
     [model]   image_height_px, image_width_px, demo_frames, attention_layers, attention_heads,
               attention_head_dim, dropout, hidden_dim, feature_dim, head_hidden_dim, backbone,
               backbone_stride,
-              freeze_backbone, backbone_weights, head, demo_reference_frame,
+              freeze_backbone, finetune_top_blocks, backbone_weights, head, demo_reference_frame,
               identification_weight, points_per_segment, gamma, attribute_scale, trajectory_points,
               frame_stack, mixture_components, tosvi_feature_pool, depth_height_px,
               depth_width_px
@@ -79,6 +79,10 @@ class ModelRecipe:
     """Frozen backbone: ``train`` encodes every frame once into a feature cache and trains the
     rest over it (every column: T-OSVI's agent frames too; shifts and colour jitter then do not
     apply, ADM mixes features)."""
+    finetune_top_blocks: int = 0
+    """With ``freeze_backbone`` (efficientnet-lite0, AWDA columns): train the last N blocks up
+    to the stage over a cache of the map entering them (batch-norm statistics fixed); 0: the
+    whole backbone frozen."""
     backbone_weights: str = "none"
     """``none`` (random init), ``imagenet`` (resnet18: torchvision's download, not possible
     offline; efficientnet-lite0: the installed package), or a path to a local ResNet-18

@@ -267,6 +267,7 @@ def trunk_config(recipe: Recipe) -> TrunkConfig:
         backbone=m.backbone,
         backbone_stride=m.backbone_stride,
         freeze_backbone=m.freeze_backbone,
+        finetune_top_blocks=m.finetune_top_blocks,
         backbone_weights=m.backbone_weights,
         head=m.head,
         attention_layers=m.attention_layers,
