@@ -79,6 +79,20 @@ def test_stages_have_the_documented_shapes_and_bad_stages_are_refused() -> None:
         TrunkConfig(backbone="resnet18", backbone_stride=16)
 
 
+def _image_samples(n: int) -> list[dict[str, torch.Tensor]]:
+    """``n`` random 64x80 AWDA samples (images, a trajectory, alternating heads), seeded."""
+    g = torch.Generator().manual_seed(1)
+    return [
+        {
+            "demo": torch.rand(10, 3, 64, 80, generator=g),
+            "first_frame": torch.rand(3, 64, 80, generator=g),
+            "trajectory": torch.rand(50, 4, generator=g),
+            "head": torch.tensor(i % 2),
+        }
+        for i in range(n)
+    ]
+
+
 def test_a_frozen_backbone_gets_no_gradient_and_no_optimizer_state(tmp_path: Path) -> None:
     from awda_bench.models.awda_net import AwdaNet
     from awda_bench.models.config import TrainConfig
@@ -88,16 +102,7 @@ def test_a_frozen_backbone_gets_no_gradient_and_no_optimizer_state(tmp_path: Pat
     model = AwdaNet(AwdaConfig(trunk=LITE0))
     before = {k: v.clone() for k, v in model.trunk.backbone.state_dict().items()}
     assert not any(p.requires_grad for p in model.trunk.backbone.parameters())
-    g = torch.Generator().manual_seed(1)
-    samples = [
-        {
-            "demo": torch.rand(10, 3, 64, 80, generator=g),
-            "first_frame": torch.rand(3, 64, 80, generator=g),
-            "trajectory": torch.rand(50, 4, generator=g),
-            "head": torch.tensor(i % 2),
-        }
-        for i in range(4)
-    ]
+    samples = _image_samples(4)
     config = TrainConfig(batch_size=2, max_steps=3, snapshot_every_steps=3, device="cpu")
     train(model, samples, config, tmp_path)
     for p in model.trunk.backbone.parameters():
@@ -163,16 +168,7 @@ def test_fine_tuned_top_blocks_train_over_cached_maps_and_nothing_else_of_the_tr
     trainable = [p for p in backbone.parameters() if p.requires_grad]
     assert top and {id(p) for p in trainable} == top
     encode = frozen_encoder(trunk)  # what the feature cache stores
-    g = torch.Generator().manual_seed(1)
-    images = [
-        {
-            "demo": torch.rand(10, 3, 64, 80, generator=g),
-            "first_frame": torch.rand(3, 64, 80, generator=g),
-            "trajectory": torch.rand(50, 4, generator=g),
-            "head": torch.tensor(i % 2),
-        }
-        for i in range(4)
-    ]
+    images = _image_samples(4)
     cached = []
     for sample in images:
         with torch.no_grad():
