@@ -108,13 +108,14 @@ class AwdaNet(nn.Module):
         """``demo (B, Td, 3, H, W)``, ``first_frame (B, 3, H, W)``, ``head (B,)`` (and
         ``camera (B,)``, each sample's camera index; ``None``: the first) -> raw waypoints
         ``(B, 15, 3 + k)`` (xyz [m], attribute logits), sets flat in order 1..5."""
-        self._check_images(demo, first_frame)
-        frames = torch.cat((demo, first_frame.unsqueeze(1)), dim=1)
-        features = self.trunk.frame_features(frames)
-        return self.forward_features(features[:, :-1], features[:, -1], head, camera)
+        demo_maps, first_maps = self.image_maps(demo, first_frame)
+        return self.forward_features(demo_maps, first_maps, head, camera)
 
-    def _check_images(self, demo: torch.Tensor, first_frame: torch.Tensor) -> None:
-        """One-line errors for image batches of the wrong rank, frame count or size."""
+    def image_maps(
+        self, demo: torch.Tensor, first_frame: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """Images ``demo (B, Td, 3, H, W)``, ``first_frame (B, 3, H, W)`` (checked: one-line
+        errors for the wrong rank, frame count or size) -> the backbone's maps of each."""
         cfg = self.config
         if demo.dim() != 5 or first_frame.dim() != 4 or demo.shape[1] != cfg.trunk.demo_frames:
             raise UsageError(
@@ -127,6 +128,9 @@ class AwdaNet(nn.Module):
                 f"images must be {size[0]}x{size[1]} (config trunk.image_height_px/width_px); "
                 f"got demo {tuple(demo.shape[-2:])}, first frame {tuple(first_frame.shape[-2:])}"
             )
+        frames = torch.cat((demo, first_frame.unsqueeze(1)), dim=1)
+        features = self.trunk.frame_features(frames)
+        return features[:, :-1], features[:, -1]
 
     def cached_maps(
         self, demo: torch.Tensor, first_frame: torch.Tensor
@@ -186,10 +190,7 @@ class AwdaNet(nn.Module):
         if "demo_features" in batch:  # a frozen backbone's cached maps
             demo, first = self.cached_maps(batch["demo_features"], batch["first_frame_features"])
         else:
-            self._check_images(batch["demo"], batch["first_frame"])
-            frames = torch.cat((batch["demo"], batch["first_frame"].unsqueeze(1)), dim=1)
-            features = self.trunk.frame_features(frames)
-            demo, first = features[:, :-1], features[:, -1]
+            demo, first = self.image_maps(batch["demo"], batch["first_frame"])
         if cfg.identification_weight > 0.0 and isinstance(self.scene_head, DemoPointer):
             pointed = self.scene_head.pointer(demo, first, batch["head"].long(), camera)
             waypoints = pointed.waypoints
