@@ -130,7 +130,12 @@ def test_predict_waypoints_returns_five_positions_and_probabilities() -> None:
 def test_overfits_a_tiny_batch_and_predicts_its_waypoints() -> None:
     """Straight-line targets (start -> one grasp waypoint): every set of 1..5 waypoints can fit them
     exactly, so the whole multi-set loss can fall to its floor (~0; soft-DTW may go slightly
-    negative). Paper optimizer settings (Adam, lr 5e-4); dropout off to overfit."""
+    negative). Paper optimizer settings (Adam, lr 5e-4); dropout off to overfit.
+
+    At lr 5e-4 the loss reaches its floor by step ~120 but the end point keeps jittering about the
+    goal there (measured, seeds 0-2, worst sample of the five sets: 1.1-2.2 cm at step 120, up to
+    2.3 cm at step 200, 0.8-1.2 cm at step 250; a CI machine's CPU gave 2.15 cm at step 120 where
+    this one gave 1.2), so the fit is checked at step 250 with a 2.5 cm bound."""
     torch.manual_seed(0)
     cfg = AwdaConfig(
         trunk=TrunkConfig(
@@ -148,7 +153,7 @@ def test_overfits_a_tiny_batch_and_predicts_its_waypoints() -> None:
     batch = default_collate([data[i] for i in range(2)])
     optimizer = torch.optim.Adam(model.parameters(), lr=5e-4)
     losses = []
-    for _ in range(120):
+    for _ in range(250):
         loss, info = model.compute_loss(batch)
         optimizer.zero_grad()
         loss.backward()
@@ -156,12 +161,12 @@ def test_overfits_a_tiny_batch_and_predicts_its_waypoints() -> None:
         losses.append(info["loss"])
     assert losses[-1] <= 0.1 * losses[0], (losses[0], losses[-1])
     goals = batch["waypoints"][:, 0]
-    with torch.no_grad():  # training mode: the fit itself (measured: ~1 cm)
+    with torch.no_grad():  # training mode: the fit itself (measured: 0.8-1.2 cm)
         raw = model(batch["demo"], batch["first_frame"], batch["head"])
     for waypoint_set in model.waypoint_sets(raw):
-        assert torch.all((waypoint_set[:, -1, :3] - goals[:, :3]).norm(dim=-1) < 0.02)
+        assert torch.all((waypoint_set[:, -1, :3] - goals[:, :3]).norm(dim=-1) < 0.025)
     for i in range(2):  # inference (eval mode): BatchNorm running statistics of a 2-sample batch
         head = HEAD_NAMES[int(batch["head"][i])]  # sample i was trained through this head
         predicted = predict_waypoints(model, batch["demo"][i], batch["first_frame"][i], head=head)
-        assert np.linalg.norm(predicted[-1, :3] - goals[i, :3].numpy()) < 0.05  # measured: 2-3.5 cm
+        assert np.linalg.norm(predicted[-1, :3] - goals[i, :3].numpy()) < 0.05  # measured: 2-4 cm
         assert predicted[-1, 3] > 0.5  # the goal waypoint's grasp attribute
