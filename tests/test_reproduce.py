@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 
 from awda_bench.cli import main
-from awda_bench.errors import UnknownChoiceError, UsageError
+from awda_bench.errors import ProtocolMismatchError, UnknownChoiceError, UsageError
 from awda_bench.reproduce import (
     LOCK_FILE,
     STAGE_TIMES,
@@ -145,19 +145,41 @@ def test_each_collect_and_run_stage_command_decides_the_config_its_progress_is_r
             assert decided == stage.config, stage.name
 
 
+def _finished_collection(
+    data: Path, suite: str, episodes_per_task: int, complete: bool = True
+) -> None:
+    """A manifest as ``collect`` leaves a training collection, finished or (``complete=False``) as
+    it writes one before its first episode; no episodes (planning reads the manifest)."""
+    from awda_bench.data.collect import MANIFEST, MANIFEST_FORMAT
+    from awda_bench.data.config import CollectConfig
+    from awda_bench.data.plan import make_plan
+    from awda_bench.reproduce import default_synthesize
+
+    config = CollectConfig(
+        suite=suite, split="train", embodiment="both", episodes_per_task=episodes_per_task,
+        synthesize=default_synthesize(suite), out=data,
+    )  # fmt: skip
+    plan = make_plan(config)
+    data.mkdir(parents=True)
+    manifest = {
+        "format": MANIFEST_FORMAT, "fingerprint": plan.fingerprint, "complete": complete,
+        "definition": plan.definition,
+    }  # fmt: skip
+    (data / MANIFEST).write_text(json.dumps(manifest))
+
+
 def test_finished_stages_are_recognized(tmp_path: Path) -> None:
     data = tmp_path / "data" / "train"
-    data.mkdir(parents=True)
-    definition = {"split": "train", "episodes_per_task": 20, "synthesize": 200}
-    (data / "manifest.json").write_text(json.dumps({"complete": True, "definition": definition}))
+    _finished_collection(data, "pick_place", 20)
     ckpt = tmp_path / "checkpoints" / "full-1"
     ckpt.mkdir(parents=True)
     (ckpt / "snapshot-000000010.pt").write_bytes(b"")
     stages = _plan(tmp_path, columns=("full-1",), steps=10)
     assert stages["collect train"].done and not stages["collect test"].done  # type: ignore[attr-defined]
     assert stages["train full-1"].done  # type: ignore[attr-defined]
-    # other data than asked for is not "done": collect then refuses or resumes it by itself
-    assert not _plan(tmp_path, columns=("full-1",), episodes_per_task=5)["collect train"].done  # type: ignore[attr-defined]
+    # another collection than asked for is refused by the plan itself, in one line
+    with pytest.raises(ProtocolMismatchError, match="holds another collection.*episodes_per_task"):
+        _plan(tmp_path, columns=("full-1",), episodes_per_task=5)
     assert not _plan(tmp_path, columns=("full-1",), steps=20)["train full-1"].done  # type: ignore[attr-defined]
 
 
@@ -165,9 +187,7 @@ def test_leave_one_family_out_runs_can_share_one_collection(tmp_path: Path) -> N
     """--data: the collection (and its feature cache) of another run directory; every training
     task is in it whatever the hold-out, and train leaves the held-out family out."""
     shared = tmp_path / "rp-drawer" / "data" / "train"
-    shared.mkdir(parents=True)
-    definition = {"split": "train", "episodes_per_task": 10, "synthesize": 200}
-    (shared / "manifest.json").write_text(json.dumps({"complete": True, "definition": definition}))
+    _finished_collection(shared, "mosaic", 10)
     out = tmp_path / "rp-door"
     stages = {
         s.name: s
@@ -441,6 +461,7 @@ def test_a_resumed_plan_estimates_only_what_is_left(tmp_path: Path) -> None:
         synthesize=200,
     )  # fmt: skip
     unit = make_plan(config).units[0]
+    _finished_collection(data, "pick_place", 20, complete=False)
     shards = shard_dir(data, unit.name)
     shards.mkdir(parents=True)
     for attempt in range(3):

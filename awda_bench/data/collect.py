@@ -191,8 +191,11 @@ class _UnitState:
 
 def collection_progress(config: CollectConfig) -> tuple[int, int]:
     """``(episodes already kept toward the plan, episodes planned)`` in ``config.out``: what a
-    resumed ``collect`` starts its progress bar from, read without writing or opening a shard."""
+    resumed ``collect`` starts its progress bar from, read without writing or opening a shard.
+    A DATA_DIR ``collect`` would refuse (another collection, not a collect directory) is refused
+    here the same way, so a plan (``reproduce --dry-run``) says so rather than counting it."""
     plan = make_plan(config)
+    check_data_dir(config.out, plan)
     already = 0
     for unit in plan.units:
         if unit_is_complete(config.out, unit.name, unit.planned):
