@@ -42,4 +42,6 @@ def test_rows_side_by_side_count_what_each_method_renders(capsys) -> None:
     per_step = {line.split()[0]: [float(x) for x in line.split()[1:]] for line in lines[7:9]}
     wall_ms, env_ms, act_ms, encode_ms, net_ms, other_ms = per_step["scripted"]
     assert encode_ms == net_ms == 0 and env_ms > 0 and act_ms >= 0
-    assert env_ms + act_ms <= wall_ms <= 1.5 * (env_ms + act_ms) + 1
+    # the row prints each figure to 0.1 ms: their sum may exceed the printed wall by the rounding
+    # (measured: 6.7 + 0.4 against a wall of 7.1 failed the exact comparison, 7.1000000000000005)
+    assert env_ms + act_ms <= wall_ms + 0.1 <= 1.5 * (env_ms + act_ms) + 1.1
