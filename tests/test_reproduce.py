@@ -145,12 +145,12 @@ def test_each_collect_and_run_stage_command_decides_the_config_its_progress_is_r
             assert decided == stage.config, stage.name
 
 
-def _finished_collection(
+def _collection_manifest(
     data: Path, suite: str, episodes_per_task: int, complete: bool = True
 ) -> None:
-    """A manifest as ``collect`` leaves a training collection, finished or (``complete=False``) as
-    it writes one before its first episode; no episodes (planning reads the manifest)."""
-    from awda_bench.data.collect import MANIFEST, MANIFEST_FORMAT
+    """The manifest ``collect`` writes for a training collection, finished or (``complete=False``)
+    as it stands before the first episode; no episodes (planning reads the manifest)."""
+    from awda_bench.data.collect import MANIFEST, _manifest
     from awda_bench.data.config import CollectConfig
     from awda_bench.data.plan import make_plan
     from awda_bench.reproduce import default_synthesize
@@ -159,18 +159,14 @@ def _finished_collection(
         suite=suite, split="train", embodiment="both", episodes_per_task=episodes_per_task,
         synthesize=default_synthesize(suite), out=data,
     )  # fmt: skip
-    plan = make_plan(config)
     data.mkdir(parents=True)
-    manifest = {
-        "format": MANIFEST_FORMAT, "fingerprint": plan.fingerprint, "complete": complete,
-        "definition": plan.definition,
-    }  # fmt: skip
+    manifest = _manifest(make_plan(config), [], complete=complete, code=[])
     (data / MANIFEST).write_text(json.dumps(manifest))
 
 
 def test_finished_stages_are_recognized(tmp_path: Path) -> None:
     data = tmp_path / "data" / "train"
-    _finished_collection(data, "pick_place", 20)
+    _collection_manifest(data, "pick_place", 20)
     ckpt = tmp_path / "checkpoints" / "full-1"
     ckpt.mkdir(parents=True)
     (ckpt / "snapshot-000000010.pt").write_bytes(b"")
@@ -187,7 +183,7 @@ def test_leave_one_family_out_runs_can_share_one_collection(tmp_path: Path) -> N
     """--data: the collection (and its feature cache) of another run directory; every training
     task is in it whatever the hold-out, and train leaves the held-out family out."""
     shared = tmp_path / "rp-drawer" / "data" / "train"
-    _finished_collection(shared, "mosaic", 10)
+    _collection_manifest(shared, "mosaic", 10)
     out = tmp_path / "rp-door"
     stages = {
         s.name: s
@@ -461,7 +457,7 @@ def test_a_resumed_plan_estimates_only_what_is_left(tmp_path: Path) -> None:
         synthesize=200,
     )  # fmt: skip
     unit = make_plan(config).units[0]
-    _finished_collection(data, "pick_place", 20, complete=False)
+    _collection_manifest(data, "pick_place", 20, complete=False)
     shards = shard_dir(data, unit.name)
     shards.mkdir(parents=True)
     for attempt in range(3):
