@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -49,7 +50,10 @@ def test_dry_run_prints_the_plan_and_writes_nothing(tmp_path: Path, capsys) -> N
         "evaluate full-1 on training tasks", "train tosvi", "evaluate tosvi", "report",
     ):  # fmt: skip
         assert stage in text
-    assert "760 episodes" in text and "estimated total for what is left" in text
+    # pick-place's default is 30 demos per task and embodiment: 14 tasks x 30 x 2 + 200
+    assert "1040 episodes" in text and "estimated total for what is left" in text
+    assert main([*argv, "--recipe", "small-scratch", "--episodes-per-task", "20"]) == 0
+    assert "760 episodes" in capsys.readouterr().out
     # the default recipe (small) freezes its backbone: Full-1 alone unless T-OSVI is named
     assert main(argv) == 0
     text = capsys.readouterr().out
@@ -90,13 +94,19 @@ def test_the_summary_names_the_command_that_decides_the_same_config(tmp_path: Pa
         {"columns": ("full-1", "tosvi"), "steps": 40, "grasp_select": "waypoint", "workers": 1},
         {"suite": "mosaic", "hold_out": "drawer", "fit_check": False, "episodes": 4},
         {"suite": "mosaic", "hold_out": "door", "data": tmp_path / "shared" / "train"},
+        {"episodes_per_task": 20},
     ):
         config = ReproduceConfig(
             **{"suite": "pick_place", "out": tmp_path / "rep", "recipe": "small", **kw}
         )
         words = shlex.split(command_line(config))
         assert words[:3] == ["python", "-m", "awda_bench"]
-        assert command.config_from_args(parser.parse_args(words[3:])) == config
+        # the demos per task are always spelled out (their default differs by suite, and changed)
+        assert f"--episodes-per-task {config.demos_per_task}" in " ".join(words)
+        again = command.config_from_args(parser.parse_args(words[3:]))
+        assert again == replace(config, episodes_per_task=config.demos_per_task)
+    assert ReproduceConfig(suite="pick_place", out=tmp_path).demos_per_task == 30
+    assert ReproduceConfig(suite="mosaic", out=tmp_path).demos_per_task == 20
 
 
 def test_awda_columns_grasp_by_the_references_centre_rule_unless_told_otherwise(
@@ -166,7 +176,7 @@ def _collection_manifest(
 
 def test_finished_stages_are_recognized(tmp_path: Path) -> None:
     data = tmp_path / "data" / "train"
-    _collection_manifest(data, "pick_place", 20)
+    _collection_manifest(data, "pick_place", 30)
     ckpt = tmp_path / "checkpoints" / "full-1"
     ckpt.mkdir(parents=True)
     (ckpt / "snapshot-000000010.pt").write_bytes(b"")
@@ -437,7 +447,7 @@ def test_a_resumed_plan_estimates_only_what_is_left(tmp_path: Path) -> None:
     from awda_bench.reproduce import COSTS
 
     frozen = _plan(tmp_path, columns=("full-1",), steps=100)  # small: + encoding the cache once
-    encode = COSTS.encode_frame_s * (280 * 11 + 200 * 10)
+    encode = COSTS.encode_frame_s * (420 * 11 + 200 * 10)
     assert frozen["train full-1"].estimate_s == pytest.approx(100 * COSTS.frozen_step_s + encode)  # type: ignore[attr-defined]
     fresh = _plan(tmp_path, columns=("full-1",), steps=100, recipe="small-scratch")
     assert fresh["train full-1"].estimate_s == pytest.approx(100 * COSTS.train_step_s["awda"])  # type: ignore[attr-defined]
@@ -453,11 +463,11 @@ def test_a_resumed_plan_estimates_only_what_is_left(tmp_path: Path) -> None:
     # 3 kept shards (and a killed run's temporary file) in one unit of the train collection
     data = tmp_path / "data" / "train"
     config = CollectConfig(
-        suite="pick_place", split="train", embodiment="both", episodes_per_task=20, out=data,
+        suite="pick_place", split="train", embodiment="both", episodes_per_task=30, out=data,
         synthesize=200,
     )  # fmt: skip
     unit = make_plan(config).units[0]
-    _collection_manifest(data, "pick_place", 20, complete=False)
+    _collection_manifest(data, "pick_place", 30, complete=False)
     shards = shard_dir(data, unit.name)
     shards.mkdir(parents=True)
     for attempt in range(3):
@@ -465,7 +475,7 @@ def test_a_resumed_plan_estimates_only_what_is_left(tmp_path: Path) -> None:
     (shards / ".a00003.h5.tmp").write_bytes(b"")
     before = fresh["collect train"].estimate_s  # type: ignore[attr-defined]
     again = _plan(tmp_path, columns=("full-1",), steps=100)["collect train"]
-    assert again.estimate_s == pytest.approx(before * (760 - 3) / 760)  # type: ignore[attr-defined]
-    assert again.detail == "760 episodes, 757 left"  # type: ignore[attr-defined]
+    assert again.estimate_s == pytest.approx(before * (1040 - 3) / 1040)  # type: ignore[attr-defined]
+    assert again.detail == "1040 episodes, 1037 left"  # type: ignore[attr-defined]
     # planning only reads: the temporary file of a collection that may still be running stays
     assert (shards / ".a00003.h5.tmp").is_file()

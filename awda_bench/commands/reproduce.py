@@ -9,8 +9,10 @@ from awda_bench.primitives.config import GRASP_SELECTS
 from awda_bench.reproduce import (
     COLUMN_KEYS,
     DEFAULT_COLUMNS,
+    DEFAULT_EPISODES_PER_TASK,
     DEFAULT_GRASP_SELECT,
     EVAL_VARIANTS,
+    SUITE_EPISODES_PER_TASK,
     SUITES,
     ReproduceConfig,
     format_plan,
@@ -51,8 +53,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument(
         "--episodes-per-task",
         type=int,
-        default=20,
-        help="training demos per task and embodiment (default 20; the reference used 100)",
+        default=None,
+        help="training demos per task and embodiment (default "
+        + ", ".join(f"{n} on {suite}" for suite, n in SUITE_EPISODES_PER_TASK.items())
+        + f", {DEFAULT_EPISODES_PER_TASK} elsewhere; the reference used 100)",
     )
     parser.add_argument(
         "--synthesize",

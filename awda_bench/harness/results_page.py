@@ -287,9 +287,17 @@ def mean_over_families(cells: Sequence[PageCell], unit: str = "families") -> Pag
 _REPRODUCE = re.compile(r"python -m awda_bench reproduce\b[^`#\n]*")
 
 
+_DEMOS_PER_TASK = re.compile(r"^\| demos per training task \| (\d+) per embodiment", re.M)
+"""reproduce.md's row naming the collection's episodes per task and embodiment."""
+
+
 def regenerate_command(directory: Path) -> str | None:
     """The first ``python -m awda_bench reproduce ... --suite ...`` line in the directory's
-    README.md or reproduce.md (backslash continuations joined), or ``None``."""
+    README.md or reproduce.md (backslash continuations joined), or ``None``.
+
+    A command that leaves ``--episodes-per-task`` to its default gets the collection's figure
+    from reproduce.md appended: the default has changed (pick-place: 20 until session 23, then
+    30), so a command that relied on it would now collect another dataset."""
     for name in ("README.md", "reproduce.md"):
         path = directory / name
         if not path.is_file():
@@ -298,8 +306,15 @@ def regenerate_command(directory: Path) -> str | None:
         for match in _REPRODUCE.finditer(text):
             command = " ".join(match.group(0).split())
             if "--suite" in command:
-                return command
+                return _with_demos_per_task(command, directory / "reproduce.md")
     return None
+
+
+def _with_demos_per_task(command: str, reproduce_md: Path) -> str:
+    if "--episodes-per-task" in command or not reproduce_md.is_file():
+        return command
+    found = _DEMOS_PER_TASK.search(reproduce_md.read_text())
+    return command if found is None else f"{command} --episodes-per-task {found.group(1)}"
 
 
 @dataclass(frozen=True)
