@@ -97,6 +97,40 @@ def test_paper_recipe_is_table_s2_and_recipes_refuse_unknown_fields(tmp_path: Pa
         load_recipe("huge")
 
 
+def test_a_variant_extends_its_base_and_overrides_only_what_it_names(tmp_path: Path) -> None:
+    from dataclasses import replace
+
+    small = load_recipe("small")
+    seed1 = load_recipe("small-seed1")  # extends = "small", [train] seed = 1
+    assert seed1.name == "small-seed1" and seed1.train.seed == 1 != small.train.seed
+    assert seed1.model == small.model and seed1.augment == small.augment
+    assert replace(seed1, name="small", path=small.path, train=small.train) == small
+    # chained, by path, a [suite.*.model] table merged field by field
+    (tmp_path / "base.toml").write_text(
+        'name = "base"\nsuites = ["pick_place", "metaworld"]\n[model]\ndropout = 0.3\n'
+        "[suite.metaworld.model]\nimage_height_px = 224\nimage_width_px = 224\n"
+    )
+    (tmp_path / "mid.toml").write_text(
+        'extends = "base.toml"\nname = "mid"\n[train]\nseed = 5\n'
+        "[suite.metaworld.model]\nimage_width_px = 200\n"
+    )
+    (tmp_path / "leaf.toml").write_text('extends = "mid.toml"\nname = "leaf"\n')
+    leaf = load_recipe(str(tmp_path / "leaf.toml"))
+    assert (leaf.name, leaf.model.dropout, leaf.train.seed) == ("leaf", 0.3, 5)
+    assert leaf.suite_models == {"metaworld": {"image_height_px": 224, "image_width_px": 200}}
+    # a missing base, a cycle and a nameless variant are one-line errors
+    (tmp_path / "lost.toml").write_text('extends = "nowhere"\nname = "lost"\n')
+    with pytest.raises(UsageError, match="extends 'nowhere', which does not exist"):
+        load_recipe(str(tmp_path / "lost.toml"))
+    (tmp_path / "a.toml").write_text('extends = "b.toml"\nname = "a"\n')
+    (tmp_path / "b.toml").write_text('extends = "a.toml"\nname = "b"\n')
+    with pytest.raises(UsageError, match="cycle"):
+        load_recipe(str(tmp_path / "a.toml"))
+    (tmp_path / "nameless.toml").write_text('extends = "base.toml"\n')
+    with pytest.raises(UsageError, match="needs a name"):
+        load_recipe(str(tmp_path / "nameless.toml"))
+
+
 def test_adm_blends_with_the_partners_first_frame_and_never_touches_labels() -> None:
     g = torch.Generator().manual_seed(0)
     batch = {

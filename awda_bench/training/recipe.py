@@ -23,6 +23,12 @@ Layout::
     [augment] adm_lambda_low, adm_lambda_high, shift_px, brightness, contrast, saturation
     [suite.<name>.model]  [model] fields that differ on that suite's collections (optional; e.g.
               Meta-World's 224x224 frames); ``train`` applies them (:meth:`Recipe.for_suite`)
+
+A variant may start from another recipe: ``extends = "small"`` (a name in the same directory, or
+a ``.toml`` path relative to the variant's file) takes every table of the base and overrides the
+fields the variant's own tables name (``suites`` and ``[suite.*]`` too); ``name`` is always the
+variant's own. A variant therefore follows its base when the base changes; its ``sha256`` (over
+the resolved fields) changes with it, and snapshots and reports record that hash.
 """
 
 from __future__ import annotations
@@ -280,6 +286,45 @@ def available_recipes(recipes_dir: Path = RECIPES_DIR) -> list[str]:
     return sorted(p.stem for p in recipes_dir.glob("*.toml"))
 
 
+def _resolved_toml(path: Path, recipes_dir: Path, chain: tuple[Path, ...]) -> dict[str, Any]:
+    """``path``'s tables, with its ``extends`` base's (recursively) underneath."""
+    try:
+        raw = tomllib.loads(path.read_text())
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise CorruptFileError(f"recipe {path} is not valid TOML ({exc})") from exc
+    base_name = raw.pop("extends", None)
+    if base_name is None:
+        return raw
+    if not isinstance(base_name, str):
+        raise UsageError(f"recipe {path}: extends must be a recipe name or a .toml path")
+    base_path = (
+        path.parent / base_name
+        if base_name.endswith(".toml")
+        else recipes_dir / f"{base_name}.toml"
+    )
+    if not base_path.is_file():
+        raise UsageError(
+            f"recipe {path} extends {base_name!r}, which does not exist; valid: "
+            f"{', '.join(available_recipes(recipes_dir))} or a .toml path"
+        )
+    if base_path.resolve() in chain or base_path.resolve() == path.resolve():
+        raise UsageError(f"recipe {path}: extends {base_name!r} makes a cycle; remove one link")
+    base = _resolved_toml(base_path, recipes_dir, (*chain, path.resolve()))
+    merged = {**base, **raw, "name": raw.get("name")}  # the name is never inherited
+    for table in ("model", "train", "augment"):
+        inherited, own = base.get(table, {}), raw.get(table, {})
+        both = isinstance(inherited, dict) and isinstance(own, dict)
+        merged[table] = {**inherited, **own} if both else own  # malformed: refused below
+    suites = dict(base.get("suite", {}))
+    for suite, table in raw.get("suite", {}).items():
+        if isinstance(table, dict) and isinstance(table.get("model", {}), dict):
+            inherited = suites.get(suite, {}).get("model", {})
+            table = {**table, "model": {**inherited, **table.get("model", {})}}
+        suites[suite] = table  # anything malformed is refused by load_recipe, naming it
+    merged["suite"] = suites
+    return merged
+
+
 def load_recipe(name_or_path: str, recipes_dir: Path = RECIPES_DIR) -> Recipe:
     """Read recipe ``name`` from ``recipes_dir``, or a ``.toml`` file given by path."""
     candidate = Path(name_or_path)
@@ -291,10 +336,7 @@ def load_recipe(name_or_path: str, recipes_dir: Path = RECIPES_DIR) -> Recipe:
         path = recipes_dir / f"{name_or_path}.toml"
         if not path.is_file():
             raise UnknownChoiceError("recipe", name_or_path, available_recipes(recipes_dir))
-    try:
-        raw = tomllib.loads(path.read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
-        raise CorruptFileError(f"recipe {path} is not valid TOML ({exc})") from exc
+    raw = _resolved_toml(path, recipes_dir, ())
     known = {"name", "suites", "model", "train", "augment", "suite"}
     unknown = sorted(set(raw) - known)
     if unknown:
