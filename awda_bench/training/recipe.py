@@ -316,11 +316,11 @@ def _resolved_toml(path: Path, recipes_dir: Path, chain: tuple[Path, ...]) -> di
         both = isinstance(inherited, dict) and isinstance(own, dict)
         merged[table] = {**inherited, **own} if both else own  # malformed: refused below
     suites = dict(base.get("suite", {}))
-    for suite, table in raw.get("suite", {}).items():
-        if isinstance(table, dict) and isinstance(table.get("model", {}), dict):
+    for suite, own_suite in raw.get("suite", {}).items():
+        if isinstance(own_suite, dict) and isinstance(own_suite.get("model", {}), dict):
             inherited = suites.get(suite, {}).get("model", {})
-            table = {**table, "model": {**inherited, **table.get("model", {})}}
-        suites[suite] = table  # anything malformed is refused by load_recipe, naming it
+            own_suite = {**own_suite, "model": {**inherited, **own_suite.get("model", {})}}
+        suites[suite] = own_suite  # anything malformed is refused by load_recipe, naming it
     merged["suite"] = suites
     return merged
 
