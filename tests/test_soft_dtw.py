@@ -124,6 +124,25 @@ def test_fast_paths_match_torch_reference_with_ragged_lengths(
         assert torch.all(results[1][1][i, n:] == 0)
 
 
+def test_auto_picks_numpy_on_cpu_triton_on_cuda_torch_elsewhere(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import importlib.util
+
+    from awda_bench.models.soft_dtw import auto_implementation
+
+    assert auto_implementation(torch.device("cpu")) == "numpy"
+    assert auto_implementation(torch.device("cuda")) == "triton"  # torch's wheels bring triton
+    assert auto_implementation(torch.device("mps")) == "torch"
+    real_find_spec = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util,
+        "find_spec",
+        lambda name, *a: None if name == "triton" else real_find_spec(name, *a),
+    )
+    assert auto_implementation(torch.device("cuda")) == "torch"  # CUDA without Triton
+
+
 def test_bad_lengths_and_implementation_are_refused() -> None:
     x, y = torch.rand(2, 5, 3), torch.rand(2, 4, 3)
     with pytest.raises(UsageError, match="lengths"):
@@ -170,7 +189,8 @@ def test_bench_soft_dtw_times_native_implementations_side_by_side(
 
     parser = argparse.ArgumentParser()
     add_soft_dtw_args(parser)
-    assert run_soft_dtw_bench(parser.parse_args(["--recipe", "small", "--repeats", "1"])) == 0
+    args = ["--recipe", "small", "--repeats", "1", "--device", "cpu"]  # also on a GPU machine
+    assert run_soft_dtw_bench(parser.parse_args(args)) == 0
     lines = capsys.readouterr().out.splitlines()
     rows = {line.split()[0]: line for line in lines if "fwd+bwd" in line}
     assert set(rows) == {"numpy", "torch"}  # the CPU's native implementations, nothing else

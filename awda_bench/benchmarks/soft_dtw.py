@@ -27,7 +27,7 @@ import torch
 from awda_bench.errors import UsageError
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import CELL_HEADS, AwdaConfig
-from awda_bench.models.soft_dtw import IMPLEMENTATIONS
+from awda_bench.models.soft_dtw import IMPLEMENTATIONS, auto_implementation
 from awda_bench.models.waypoint_loss import multi_waypoint_sdtw_loss
 from awda_bench.training.loop import resolve_device
 
@@ -168,7 +168,7 @@ def run_soft_dtw_bench(args: argparse.Namespace) -> int:
 
     step_times = _time(step, device, max(3, args.repeats // 2), 1)
     step_s = statistics.median(step_times)
-    default = "numpy" if device.type == "cpu" else "torch"  # soft_dtw's "auto"
+    default = auto_implementation(device)  # what the step's loss ran
     print(f"  Full-1 training step at {h}x{w}, batch {b}: {step_s:.3f} s (loss: {default})")
     base = step_s - medians.get(default, 0.0)
     for impl, s in medians.items():

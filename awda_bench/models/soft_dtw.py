@@ -41,6 +41,7 @@ reference; the ``numpy`` implementation is this module's own.
 
 from __future__ import annotations
 
+import importlib.util
 from typing import Any
 
 import numpy as np
@@ -70,10 +71,24 @@ same recursions fused into one Triton kernel launch per pass (CUDA; on a CPU ten
 interpreter runs it, for testing only); ``numpy``: the
 same recursion on the CPU, in the input's dtype, over a skewed table whose anti-diagonals are
 contiguous slices with the batch innermost (no gathers; numpy's per-op overhead is ~4x below
-torch's and its float32 ``exp`` is vectorized); ``auto``: numpy for CPU tensors, torch otherwise.
-``triton`` is opt-in until it has been run on a GPU: its tests pass in Triton's CPU interpreter
-(and run on CUDA where present), but no GPU was available when it was written; once
-``bench soft-dtw --device cuda`` shows it agrees and is faster, make it ``auto``'s CUDA choice."""
+torch's and its float32 ``exp`` is vectorized); ``auto``: :func:`auto_implementation` (numpy for
+CPU tensors, triton for CUDA ones, torch on any other device). Triton became ``auto``'s CUDA choice
+once it had run on a GPU (2026-12-04, one H200, ``bash scripts/gpu_checks.sh``): the CUDA cases of
+``tests/test_soft_dtw.py`` pass, and at the ``paper`` recipe's batch (30 x 5 sets x 50 points,
+gamma 0.001) the loss's forward + backward takes 3.45 ms against the torch loop's 65.75 ms (19x),
+agreeing to 6.1e-11 in float64 (``reports/gpu-checks/``)."""
+
+
+def auto_implementation(device: torch.device) -> str:
+    """The implementation ``"auto"`` runs on ``device``: ``numpy`` on a CPU, ``triton`` on CUDA
+    (Triton compiles for NVIDIA and AMD GPUs, which PyTorch both calls ``cuda``; PyTorch's Linux
+    CUDA wheels bring it) where Triton is installed, ``torch`` elsewhere (MPS, XPU, CUDA without
+    Triton)."""
+    if device.type == "cpu":
+        return "numpy"
+    if device.type == "cuda" and importlib.util.find_spec("triton") is not None:
+        return "triton"
+    return "torch"
 
 
 def _skew(cost: np.ndarray) -> np.ndarray:
@@ -256,7 +271,7 @@ def soft_dtw_from_cost(
     lengths = _check_lengths(lengths, cost.shape[0], cost.shape[1], cost.device)
     impl = implementation
     if impl == "auto":
-        impl = "numpy" if cost.device.type == "cpu" else "torch"
+        impl = auto_implementation(cost.device)
     out: torch.Tensor = _SoftDtwFunction.apply(cost, float(gamma), lengths, impl)
     return out
 
@@ -277,7 +292,9 @@ def soft_dtw(
         raise UsageError(
             f"soft-DTW needs x (B, N, D) and y (B, M, D); got {tuple(x.shape)} and {tuple(y.shape)}"
         )
-    if implementation == "numpy" or (implementation == "auto" and x.device.type == "cpu"):
+    if implementation == "auto":
+        implementation = auto_implementation(x.device)
+    if implementation == "numpy":
         if x.dtype != y.dtype:
             raise UsageError(f"soft-DTW needs x and y of one dtype, got {x.dtype} and {y.dtype}")
         if not gamma > 0:
