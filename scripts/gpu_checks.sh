@@ -7,8 +7,9 @@
 # share of it).
 #
 # Needs only torch (with CUDA), triton, tqdm, h5py, Pillow, torchvision and pytest: the soft-DTW
-# modules, recipes and AwdaNet import no simulator (nor does this script import the CLI), so it runs from a plain checkout with
-# PYTHONPATH set, on a GPU machine without the project's environment.
+# modules, recipes and AwdaNet import no simulator (nor does this script import the CLI), so it
+# runs from a plain checkout with PYTHONPATH set, on a GPU machine without the project's
+# environment.
 #
 #   bash scripts/gpu_checks.sh [LOG_DIR]     # logs to LOG_DIR (default: runs/gpu-checks)
 set -uo pipefail
