@@ -68,9 +68,9 @@ SUITE_EPISODES_PER_TASK: dict[str, int] = {"pick_place": 30}
 (reports/learned/recipe-study.md, sessions 20-23): with ``small`` Full-1 reached 0.8975 held-out
 at 20 per task, 0.9475 at 30 and 0.965 / 0.975 (two training seeds) at 50, and is data-limited
 there. 30 is the most that keeps ``--columns full-1,tosvi`` from an empty directory near issue
-24's 3 hours on the 2-core machines: measured from an empty directory in session 24 on session
-22's machine, ~2 h 57 min (collection 34 min, Full-1 26 min, T-OSVI 62 + ~55 min; recipe study,
-Session 24); ~2 h 40 min predicted at session 20's speed; 50 per task takes ~4 h."""
+24's 3 hours on the 2-core machines: measured from an empty directory on session 22's machine
+(sessions 24-25), 2 h 56.5 min (collection 34 min, Full-1 26 min, T-OSVI 62 + 54 min; recipe
+study, Session 24); ~2 h 40 min predicted at session 20's speed; 50 per task takes ~4 h."""
 
 
 def default_episodes_per_task(suite_name: str) -> int:
