@@ -17,11 +17,16 @@ from awda_bench.errors import UsageError
 from awda_bench.harness import paper_values
 from awda_bench.harness.aggregate import ALL, S4_FAMILIES, mean_se
 from awda_bench.harness.bootstrap_ci import outcomes, stratified_bootstrap_ci, stratified_mean
-from awda_bench.harness.results_index import ANALYSIS_KEYS, LEARNED_KEYS, load_index
+from awda_bench.harness.results_index import (
+    ANALYSIS_KEYS,
+    LEARNED_KEYS,
+    load_index,
+    load_missing,
+)
 from awda_bench.harness.results_page import (
     CI,
+    NO_RUN_YET,
     NOT_RUN,
-    NOT_TRAINED,
     OURS,
     PAGE_NAME,
     build_results_page,
@@ -233,7 +238,7 @@ def test_the_page_reads_each_cell_from_its_source(reports: Path) -> None:
     assert "[learned/pp/](learned/pp/) `full-1-centre`" in full1["source"]
     assert full1["note"] == "centre rule"
     tosvi = page.s3_pick_place.loc["T-OSVI [1] (`tosvi`)"]
-    assert (tosvi[OURS], tosvi["note"]) == (NOT_RUN, NOT_TRAINED)
+    assert (tosvi[OURS], tosvi["note"]) == (NOT_RUN, NO_RUN_YET)
     assert "no counterpart" in page.s3_pick_place.loc["DAML [4] (`daml`)"]["note"]
     drawer = page.s4[(page.s4.index == "Drawer") & (page.s4["column"] == "Full-1 (`full-1`)")]
     assert drawer.iloc[0][OURS] == "0.15 ± 0.05"  # rates 0.10, 0.20
@@ -366,6 +371,37 @@ def test_the_index_defaults_the_label_and_refuses_overlaps(tmp_path: Path) -> No
         load_index(write_index(tmp_path, '[pick_place]\nfull-3 = { source = "a" }\n'))
 
 
+def test_a_cell_with_no_run_says_why_and_how_to_fill_it(reports: Path) -> None:
+    index = reports / "results_sources.toml"
+    text = INDEX.replace(
+        'scripted = { source = "." }',
+        'scripted = { source = "." }\ntosvi-depth = { missing = "train ~80 min: reproduce X" }\n'
+        'tosvi-mode = { missing = "evaluate ~54 min" }',
+    ).replace("[mosaic]\n", '[mosaic]\ntosvi = { missing = "a run per family" }\n')
+    index.write_text(text)
+    missing = load_missing(index)
+    assert missing[("pick_place", "tosvi-depth", None)] == "train ~80 min: reproduce X"
+    assert [e.column for e in load_index(index)] == ["full-1", "scripted", "gt-waypoints", "full-1"]
+    page = build_results_page(index)
+    depth = page.s3_pick_place.loc["T-OSVI +depth (`tosvi-depth`)"]
+    assert (depth[OURS], depth["note"]) == (NOT_RUN, f"{NO_RUN_YET}: train ~80 min: reproduce X")
+    tosvi = page.s3_pick_place.loc["T-OSVI [1] (`tosvi`)"]
+    assert tosvi["note"] == NO_RUN_YET  # no line: the bare reason
+    mode = page.s3_analysis.loc["T-OSVI [1], mode action (`tosvi-mode`)"]
+    assert mode["note"] == f"{NO_RUN_YET}: evaluate ~54 min"
+    # a suite-wide line covers every family without a source of its own
+    door = page.s4[(page.s4.index == "Door") & (page.s4["column"] == "T-OSVI [1] (`tosvi`)")]
+    assert door.iloc[0]["note"] == f"{NO_RUN_YET}: a run per family"
+    # a missing line is a text only, and it names a trainable column
+    for bad, match in (
+        ('no-ad = { missing = "x", note = "y" }', "a text only"),
+        ('random = { missing = "x" }', "choose one of"),
+    ):
+        index.write_text(text.replace("[pick_place]\n", f"[pick_place]\n{bad}\n", 1))
+        with pytest.raises(UsageError, match=match):
+            load_missing(index)
+
+
 def test_every_reproduce_column_is_a_page_column_and_shares_the_paper_values() -> None:
     from awda_bench import reproduce
 
@@ -426,7 +462,7 @@ def test_the_s3_analysis_rows_read_reached_and_grasped_beside_the_papers_reachin
     assert (row["reached"], row["grasped"], row[OURS]) == ("0.40", "0.20", "0.10 ± 0.05")
     assert row["paper: reached"] == "0.11" and row["paper: success"] == "not given"
     stack = page.s3_analysis.loc["T-OSVI [1], no frame-stack (`tosvi-no-frame-stack`)"]
-    assert (stack[OURS], stack["note"]) == (NOT_RUN, NOT_TRAINED)
+    assert (stack[OURS], stack["note"]) == (NOT_RUN, NO_RUN_YET)
     assert stack["paper: reached"] == "0.12" and stack["paper: success"] == "0.01"
     assert "§S3 analysis" in page.markdown()
     # the analysis is pick-and-place's: an entry under another suite is refused in one line
@@ -462,7 +498,7 @@ def test_the_metaworld_rows_group_the_held_out_tasks_by_their_published_difficul
     assert tasks.loc["pick-place-wall-v3", "difficulty"] == "very_hard"
     assert tasks.loc["window-open-v3", "Full-1 (`full-1`)"] == "0.50 ± 0.25†"
     tosvi = page.s3_metaworld.loc["T-OSVI [1] (`tosvi`)"]
-    assert (tosvi["ours: Meta-World [all]"], tosvi["note"]) == (NOT_RUN, NOT_TRAINED)
+    assert (tosvi["ours: Meta-World [all]"], tosvi["note"]) == (NOT_RUN, NO_RUN_YET)
     assert "[hard] = medium, hard, very_hard" in page.markdown()
 
 

@@ -15,11 +15,17 @@ One inline table per cell, so pointing a cell at another directory is a one-line
 ``source``: a report directory (what ``python -m awda_bench report`` writes), relative to the
 index's directory. ``label``: the method label inside it (default: the column key, which is the
 label ``reproduce`` gives a column). ``note``: a short text printed beside the cell.
+
+A cell that has no run yet may say why, what it would cost and the command that fills it, in place
+of a source (:func:`load_missing`)::
+
+    tosvi-depth = { missing = "train ~80 + evaluate ~75 min: reproduce ... --columns tosvi-depth" }
 """
 
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -47,6 +53,9 @@ FAMILY_KEYS: tuple[str, ...] = tuple(k for k, _ in S4_FAMILIES)
 
 ENTRY_FIELDS: tuple[str, ...] = ("source", "label", "note")
 """Fields of one entry."""
+
+MISSING_FIELD = "missing"
+"""The one field of an entry for a cell with no run yet: why, and how to fill it."""
 
 
 @dataclass(frozen=True)
@@ -105,16 +114,14 @@ def _entry(index: Path, suite: str, family: str | None, column: str, value: obje
     )
 
 
-def load_index(index: Path) -> list[SourceEntry]:
-    """The entries of ``index`` in file order; a bad file raises a one-line
-    :class:`~awda_bench.errors.UsageError` naming the entry and the fix."""
+def _cells(index: Path) -> Iterator[tuple[str, str | None, str, object]]:
+    """``(suite, family, column, value)`` of every line of ``index``, in file order."""
     if not index.is_file():
         raise UsageError(f"no results index at {index}; write one (see reports/{INDEX_NAME})")
     try:
         data = tomllib.loads(index.read_text())
     except tomllib.TOMLDecodeError as exc:
         raise CorruptFileError(f"{index} is not valid TOML: {exc}") from exc
-    entries: list[SourceEntry] = []
     for suite, table in data.items():
         if suite not in SUITES:
             raise UnknownChoiceError(f"suite table in {index}", suite, SUITES)
@@ -123,9 +130,46 @@ def load_index(index: Path) -> list[SourceEntry]:
         for key, value in table.items():
             if suite == "mosaic" and key in FAMILY_KEYS and isinstance(value, dict):
                 for column, cell in value.items():
-                    entries.append(_entry(index, suite, key, column, cell))
+                    yield suite, key, column, cell
             else:
-                entries.append(_entry(index, suite, None, key, value))
+                yield suite, None, key, value
+
+
+def _is_missing(value: object) -> bool:
+    return isinstance(value, dict) and MISSING_FIELD in value
+
+
+def load_missing(index: Path) -> dict[tuple[str, str, str | None], str]:
+    """``(suite, column, family) -> text`` of the index's cells with no run yet (``missing =``;
+    family ``None``: the whole suite, so every family without a source of its own)."""
+    missing: dict[tuple[str, str, str | None], str] = {}
+    for suite, family, column, value in _cells(index):
+        if not _is_missing(value):
+            continue
+        assert isinstance(value, dict)
+        table = suite if family is None else f"{suite}.{family}"
+        where = f"{index} [{table}] {column}"
+        known = LEARNED_KEYS + ANALYSIS_KEYS
+        if column not in known:
+            raise UnknownChoiceError(f"column in {where}", column, known)
+        if set(value) != {MISSING_FIELD} or not isinstance(value[MISSING_FIELD], str):
+            raise UsageError(
+                f'{where}: a cell with no run is written {column} = {{ {MISSING_FIELD} = "WHY" }} '
+                '(a text only; with a run, use source = "DIR" instead)'
+            )
+        missing[(suite, column, family)] = value[MISSING_FIELD]
+    return missing
+
+
+def load_index(index: Path) -> list[SourceEntry]:
+    """The entries of ``index`` that name a source, in file order (cells with no run yet:
+    :func:`load_missing`); a bad file raises a one-line :class:`~awda_bench.errors.UsageError`
+    naming the entry and the fix."""
+    entries = [
+        _entry(index, suite, family, column, value)
+        for suite, family, column, value in _cells(index)
+        if not _is_missing(value)
+    ]
     seen: dict[tuple[str, str, str | None], SourceEntry] = {}
     for entry in entries:
         for family in (entry.family, None) if entry.family else (None, *FAMILY_KEYS):

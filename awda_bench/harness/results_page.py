@@ -51,6 +51,7 @@ from awda_bench.harness.results_index import (
     SUITES,
     SourceEntry,
     load_index,
+    load_missing,
 )
 from awda_bench.suites import TaskDef, load_suite
 
@@ -66,8 +67,8 @@ TOX_COMMAND = "tox -e report -- --results-page"
 NOT_RUN = "not run"
 """What a cell without a source says (its note says why)."""
 
-NOT_TRAINED = "not trained yet"
-"""Why a trainable column has no source."""
+NO_RUN_YET = "no run yet"
+"""Why a column we can run has no source (followed by the index's ``missing`` text, if any)."""
 
 METAWORLD_SUITE = "metaworld"
 """The suite behind Table S3's Meta-World rows (the reference's five held-out tasks)."""
@@ -508,6 +509,7 @@ class _Builder:
     def __init__(self, index: Path) -> None:
         self.index = index
         self.entries = load_index(index)
+        self.missing = load_missing(index)
         self.reports: dict[Path, ReportDir] = {}
         self.where: dict[SourceEntry, str] = {e: f"{index} {e.name}" for e in self.entries}
         for entry in self.entries:
@@ -565,8 +567,13 @@ class _Builder:
         """Our cell, or the reason it is not run."""
         entry = self.find(suite, column, None if group == ALL else group)
         if entry is None:
-            trainable = column in LEARNED_KEYS + ANALYSIS_KEYS
-            return NO_COUNTERPART.get(column, NOT_TRAINED if trainable else "")
+            if column in NO_COUNTERPART:
+                return NO_COUNTERPART[column]
+            if column not in LEARNED_KEYS + ANALYSIS_KEYS:
+                return ""
+            family = None if group == ALL else group
+            why = self.missing.get((suite, column, family), self.missing.get((suite, column, None)))
+            return NO_RUN_YET if why is None else f"{NO_RUN_YET}: {why}"
         report = self.report(entry)
         if (suite, group, entry.label) not in report.cells:
             return f"{entry.source} has no {group} episodes of {entry.label!r}"
@@ -720,7 +727,11 @@ class _Builder:
         keys = ["full-1"] + [
             k
             for k in LEARNED_KEYS
-            if k != "full-1" and any(e.suite == "mosaic" and e.column == k for e in self.entries)
+            if k != "full-1"
+            and (
+                any(e.suite == "mosaic" and e.column == k for e in self.entries)
+                or any(s == "mosaic" and c == k for s, c, _ in self.missing)
+            )
         ]
         titles = dict(S3_COLUMNS)
         by_key = {k: dict(self.family_cells("mosaic", k)) for k in keys}
