@@ -38,7 +38,7 @@ from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from awda_bench.data.config import CollectConfig
 from awda_bench.errors import AwdaError, CorruptFileError, UnknownChoiceError, UsageError
@@ -51,6 +51,9 @@ from awda_bench.harness.paper_values import (
 from awda_bench.harness.sweep import SweepConfig
 from awda_bench.primitives.config import CENTRE_SUFFIX, GRASP_SELECTS
 from awda_bench.training.columns import TRAINABLE, Column
+
+if TYPE_CHECKING:
+    from awda_bench.training.recipe import Recipe
 
 SUITES: tuple[str, ...] = ("pick_place", "mosaic", "metaworld", "metaworld_ml45")
 """Suites ``reproduce`` knows how to lay out."""
@@ -187,6 +190,10 @@ class Costs:
     depth ResNet-18 over 96 wrist depth images a step) is not measured since the attention fix:
     it is scaled by the ratio measured before it (10.7 s vs 5.3 s at 1 thread beside a 2-thread
     job)."""
+    frozen_tosvi_one_frame_step_s: float = 0.49
+    """The same for a one-frame T-OSVI (``tosvi-no-frame-stack``): 0.485 s a step, pick-place's
+    default collection, 2026-12-04 (the sampled evaluation of another column beside it for the
+    last ~6 min)."""
     agent_episode_steps: float = 62.4
     """Mean steps of a kept pick-place agent episode (T-OSVI caches every agent frame; the
     20-per-task train split: 17,472 steps in 280 episodes)."""
@@ -386,6 +393,17 @@ def _eval_remaining(sweep: SweepConfig) -> int | None:
     return sum((j.spec.task, j.spec.episode) not in done[j.snapshot.sha256] for j in plan.jobs)
 
 
+def _cache_built(data: Path, recipe: Recipe, arch: str) -> bool:
+    """Whether the frozen-trunk feature cache an ``arch`` column trains from is already built
+    (by an earlier column of this collection: T-OSVI-style columns share theirs)."""
+    from awda_bench.training.run import cached_features_path
+
+    manifest = _manifest(data)
+    if manifest is None or not manifest.get("fingerprint"):
+        return False
+    return cached_features_path(data, str(manifest["fingerprint"]), recipe, arch).is_file()
+
+
 def _has_snapshots(ckpt: Path) -> bool:
     from awda_bench.models.snapshot import list_snapshots
 
@@ -500,12 +518,14 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
     target = _train_target(config.recipe, config.steps)
     from awda_bench.training.recipe import load_recipe
 
-    frozen = load_recipe(config.recipe).model.freeze_backbone
+    recipe = load_recipe(config.recipe)
+    frozen = recipe.model.freeze_backbone
     factor = COSTS.paper_step_factor if config.recipe == "paper" else 1.0
     tasks, units = _eval_tasks(config.suite, config.hold_out)
     episodes = config.episodes if config.episodes is not None else suite.episodes_per_task
     runs = out / "runs"
     trained_keys = [k for k in config.columns if k not in EVAL_VARIANTS]
+    planned_caches: set[str] = set()  # feature caches an earlier column of this plan encodes
     for key in trained_keys:
         column = COLUMN_KEYS[key]
         ckpt = out / "checkpoints" / key
@@ -522,17 +542,24 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         if config.threads is not None:
             argv += ["--threads", str(config.threads)]
         step_s, encode_s = COSTS.train_step_s[column.arch] * factor, 0.0
+        pairs = (n_train - synthesize) / 2
         if frozen and column.arch == "awda":  # cached features; the cache is encoded once
             step_s = COSTS.frozen_step_s
-            if not any((data / "features").glob("*.h5")):
-                # o_1 of every agent episode, the demo frames of every demonstrator and
-                # synthesized one
-                pairs = (n_train - synthesize) / 2
-                encode_s = COSTS.encode_frame_s * (pairs * 11 + synthesize * 10)
+            # o_1 of every agent episode, the demo frames of every demonstrator and synthesized one
+            encode_s = COSTS.encode_frame_s * (pairs * 11 + synthesize * 10)
         elif frozen:  # T-OSVI over cached (pooled) maps: every agent frame is encoded once
-            step_s = COSTS.frozen_tosvi_step_s[column.arch]
-            pairs = (n_train - synthesize) / 2  # counted only before the first step
+            from awda_bench.training.run import frame_stack_of
+
+            one_frame = frame_stack_of(recipe, column) == 1
+            step_s = COSTS.frozen_tosvi_one_frame_step_s if one_frame else (
+                COSTS.frozen_tosvi_step_s[column.arch]
+            )  # fmt: skip
             encode_s = COSTS.encode_frame_s * pairs * (COSTS.agent_episode_steps + 10)
+        cache_kind = "awda" if column.arch == "awda" else "tosvi"  # T-OSVI-style nets share one
+        if cache_kind in planned_caches or (encode_s and _cache_built(data, recipe, column.arch)):
+            encode_s = 0.0
+        if frozen:
+            planned_caches.add(cache_kind)
         steps_done = _steps_done(ckpt)
         stages.append(
             Stage(

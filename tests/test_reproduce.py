@@ -440,6 +440,37 @@ def _alive(pid: int) -> bool:
     return stat.is_file() and stat.read_text().split()[2] != "Z"
 
 
+def test_the_plan_encodes_each_feature_cache_once(tmp_path: Path) -> None:
+    """T-OSVI-style columns share one cache of pooled maps: the plan counts its encoding for the
+    first of them only, and not at all once the file is there; a one-frame T-OSVI steps faster."""
+    from awda_bench.reproduce import COSTS
+    from awda_bench.training.recipe import load_recipe
+    from awda_bench.training.run import cached_features_path
+
+    columns = ("full-1", "tosvi", "tosvi-no-frame-stack")
+    encode = COSTS.encode_frame_s * 420 * (COSTS.agent_episode_steps + 10)
+    plan = _plan(tmp_path, columns=columns, steps=100)
+    assert plan["train tosvi"].estimate_s == pytest.approx(  # type: ignore[attr-defined]
+        100 * COSTS.frozen_tosvi_step_s["tosvi"] + encode
+    )
+    assert plan["train tosvi-no-frame-stack"].estimate_s == pytest.approx(  # type: ignore[attr-defined]
+        100 * COSTS.frozen_tosvi_one_frame_step_s
+    )
+    # the collection is there and so is T-OSVI's cache (an earlier run's): nothing to encode
+    data = tmp_path / "data" / "train"
+    _collection_manifest(data, "pick_place", 30)
+    fingerprint = json.loads((data / "manifest.json").read_text())["fingerprint"]
+    path = cached_features_path(data, fingerprint, load_recipe("small"), "tosvi")
+    path.parent.mkdir()
+    path.write_bytes(b"")
+    plan = _plan(tmp_path, columns=("full-1", "tosvi-no-frame-stack"), steps=100)
+    assert plan["train tosvi-no-frame-stack"].estimate_s == pytest.approx(  # type: ignore[attr-defined]
+        100 * COSTS.frozen_tosvi_one_frame_step_s
+    )
+    awda = COSTS.encode_frame_s * (420 * 11 + 200 * 10)  # AWDA's cache is another file
+    assert plan["train full-1"].estimate_s == pytest.approx(100 * COSTS.frozen_step_s + awda)  # type: ignore[attr-defined]
+
+
 def test_a_resumed_plan_estimates_only_what_is_left(tmp_path: Path) -> None:
     from awda_bench.data.config import CollectConfig
     from awda_bench.data.plan import make_plan

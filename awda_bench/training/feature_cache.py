@@ -86,6 +86,12 @@ def cache_key(meta: Mapping[str, Any]) -> str:
     return hashlib.sha256(blob).hexdigest()[:16]
 
 
+def cache_path(root: Path, fingerprint: str, trunk: TrunkConfig, variant: str = "rgb") -> Path:
+    """The file that holds (or will hold) the cache of collection ``root`` (whose fingerprint is
+    ``fingerprint``) for ``trunk`` and ``variant``."""
+    return root / CACHE_DIR / f"{cache_key(cache_meta(fingerprint, trunk, variant))}.h5"
+
+
 def episode_name(data: CollectedData, ref: EpisodeRef) -> str:
     """The group an episode's features live in."""
     return f"{ref.file.relative_to(data.root).with_suffix('').as_posix()}/{ref.traj}"
@@ -222,8 +228,8 @@ def load_or_build(
     stand-in; whatever it computes is stored under the trunk's key."""
     meta = cache_meta(data.fingerprint, trunk, variant)
     key = cache_key(meta)
-    folder = data.root / CACHE_DIR
-    path = folder / f"{key}.h5"
+    path = cache_path(data.root, data.fingerprint, trunk, variant)
+    folder = path.parent
     refs = {episode_name(data, ref): (ref, np.asarray(idx, np.int64)) for ref, idx in frames}
     wanted = {name: idx for name, (_, idx) in refs.items()}
     partial = path.with_name(path.name + ".partial")

@@ -49,7 +49,7 @@ from awda_bench.models.frame_encoder import frozen_encoder
 from awda_bench.models.tosvi_net import TosviNet, pool_feature_maps
 from awda_bench.training.augment import BatchTreatment
 from awda_bench.training.columns import Column, column_for
-from awda_bench.training.feature_cache import load_or_build
+from awda_bench.training.feature_cache import cache_path, load_or_build
 from awda_bench.training.feature_datasets import (
     CachedAwdaPairs,
     CachedTosviSamples,
@@ -353,6 +353,14 @@ def cache_variant(pool: int) -> str:
     """The cache variant of backbone maps average-pooled by ``pool`` (1: the maps themselves,
     the file AWDA's datasets read)."""
     return "rgb" if pool == 1 else f"rgb-avgpool{pool}"
+
+
+def cached_features_path(root: Path, fingerprint: str, recipe: Recipe, arch: str) -> Path:
+    """Where the frozen-trunk feature cache an ``arch`` network trains from under ``recipe`` lives
+    for collection ``root`` (present or not): AWDA's maps, or T-OSVI's pooled ones (shared by
+    every T-OSVI-style column, whatever its frame-stack)."""
+    pool = 1 if arch == "awda" else recipe.model.tosvi_feature_pool
+    return cache_path(root, fingerprint, trunk_config(recipe), cache_variant(pool))
 
 
 def with_cached_features(
