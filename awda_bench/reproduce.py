@@ -191,9 +191,9 @@ class Costs:
     it is scaled by the ratio measured before it (10.7 s vs 5.3 s at 1 thread beside a 2-thread
     job)."""
     frozen_tosvi_one_frame_step_s: float = 0.49
-    """The same for a one-frame T-OSVI (``tosvi-no-frame-stack``): 0.485 s a step, pick-place's
-    default collection, 2026-12-04 (the sampled evaluation of another column beside it for the
-    last ~6 min)."""
+    """The same for a one-frame T-OSVI (``tosvi-no-frame-stack``): 0.485 s a step (median
+    compute 0.47 s), pick-place's default collection, 2026-12-04, with the test suite running at
+    the lowest priority beside it for ~17 of its 24.6 minutes (so an idle figure may be lower)."""
     agent_episode_steps: float = 62.4
     """Mean steps of a kept pick-place agent episode (T-OSVI caches every agent frame; the
     20-per-task train split: 17,472 steps in 280 episodes)."""
