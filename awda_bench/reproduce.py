@@ -197,6 +197,10 @@ class Costs:
     agent_episode_steps: float = 62.4
     """Mean steps of a kept pick-place agent episode (T-OSVI caches every agent frame; the
     20-per-task train split: 17,472 steps in 280 episodes)."""
+    synthesized_episode_frames: float = 23.5
+    """Frames a T-OSVI-style column that trains on the synthesized episodes (``no-waypoints``)
+    adds to the pooled cache per synthesized episode (every step, as agent stacks, plus its demo
+    frames): 4,701 frames for pick-place's 200, session 25."""
     encode_frame_s: float = 0.035
     """Encoding one 240x320 frame into the feature cache (pick-place's T-OSVI cache: 20,272
     frames at ~29 frames/s, pick_place-small-v6; 0.077 s beside another job)."""
@@ -393,15 +397,28 @@ def _eval_remaining(sweep: SweepConfig) -> int | None:
     return sum((j.spec.task, j.spec.episode) not in done[j.snapshot.sha256] for j in plan.jobs)
 
 
-def _cache_built(data: Path, recipe: Recipe, arch: str) -> bool:
+def _cache_built(data: Path, recipe: Recipe, arch: str, *, synthesized: bool = False) -> bool:
     """Whether the frozen-trunk feature cache an ``arch`` column trains from is already built
-    (by an earlier column of this collection: T-OSVI-style columns share theirs)."""
+    (by an earlier column of this collection: T-OSVI-style columns share theirs); with
+    ``synthesized``, whether it also holds the synthesized episodes' frames (a column without
+    them, e.g. ``tosvi``, built it without)."""
     from awda_bench.training.run import cached_features_path
 
     manifest = _manifest(data)
     if manifest is None or not manifest.get("fingerprint"):
         return False
-    return cached_features_path(data, str(manifest["fingerprint"]), recipe, arch).is_file()
+    path = cached_features_path(data, str(manifest["fingerprint"]), recipe, arch)
+    if not synthesized or not path.is_file():
+        return path.is_file()
+    import h5py
+
+    from awda_bench.data.config import ROLE_SYNTHESIZED
+
+    try:  # groups are named <unit path>/<traj>, and synthesized units live under their role
+        with h5py.File(path, "r") as f:
+            return ROLE_SYNTHESIZED in f
+    except OSError:  # unreadable: training rebuilds it, so its encoding is still to come
+        return False
 
 
 def _has_snapshots(ckpt: Path) -> bool:
@@ -543,10 +560,13 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             argv += ["--threads", str(config.threads)]
         step_s, encode_s = COSTS.train_step_s[column.arch] * factor, 0.0
         pairs = (n_train - synthesize) / 2
+        # frames to encode into the cache: (part, frames), the synthesized episodes' own part
+        parts: list[tuple[str, float]] = []
+        cache_kind = "awda" if column.arch == "awda" else "tosvi"  # T-OSVI-style nets share one
         if frozen and column.arch == "awda":  # cached features; the cache is encoded once
             step_s = COSTS.frozen_step_s
             # o_1 of every agent episode, the demo frames of every demonstrator and synthesized one
-            encode_s = COSTS.encode_frame_s * (pairs * 11 + synthesize * 10)
+            parts = [(cache_kind, pairs * 11), (f"{cache_kind}+synthesized", synthesize * 10)]
         elif frozen:  # T-OSVI over cached (pooled) maps: every agent frame is encoded once
             from awda_bench.training.run import frame_stack_of
 
@@ -554,12 +574,17 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             step_s = COSTS.frozen_tosvi_one_frame_step_s if one_frame else (
                 COSTS.frozen_tosvi_step_s[column.arch]
             )  # fmt: skip
-            encode_s = COSTS.encode_frame_s * pairs * (COSTS.agent_episode_steps + 10)
-        cache_kind = "awda" if column.arch == "awda" else "tosvi"  # T-OSVI-style nets share one
-        if cache_kind in planned_caches or (encode_s and _cache_built(data, recipe, column.arch)):
-            encode_s = 0.0
-        if frozen:
-            planned_caches.add(cache_kind)
+            parts = [
+                (cache_kind, pairs * (COSTS.agent_episode_steps + 10)),
+                (f"{cache_kind}+synthesized", synthesize * COSTS.synthesized_episode_frames),
+            ]
+        if not column.synthesized:
+            parts = parts[:1]
+        for part, frames in parts:
+            built = _cache_built(data, recipe, column.arch, synthesized=part != cache_kind)
+            if part not in planned_caches and not built:
+                encode_s += COSTS.encode_frame_s * frames
+            planned_caches.add(part)
         steps_done = _steps_done(ckpt)
         stages.append(
             Stage(

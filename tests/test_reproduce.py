@@ -471,6 +471,42 @@ def test_the_plan_encodes_each_feature_cache_once(tmp_path: Path) -> None:
     assert plan["train full-1"].estimate_s == pytest.approx(100 * COSTS.frozen_step_s + awda)  # type: ignore[attr-defined]
 
 
+def test_the_plan_counts_the_synthesized_frames_no_waypoints_adds_to_the_cache(
+    tmp_path: Path,
+) -> None:
+    """``no-waypoints`` trains a T-OSVI-sized net on the synthesized episodes too: its cache holds
+    T-OSVI's frames plus theirs, so after ``tosvi`` it still encodes the synthesized part, and a
+    cache file that lacks them does not count as built for it."""
+    import h5py
+
+    from awda_bench.reproduce import COSTS
+    from awda_bench.training.recipe import load_recipe
+    from awda_bench.training.run import cached_features_path
+
+    agents = COSTS.encode_frame_s * 420 * (COSTS.agent_episode_steps + 10)
+    synthesized = COSTS.encode_frame_s * 200 * COSTS.synthesized_episode_frames
+    step = COSTS.frozen_tosvi_step_s["tosvi"]
+    alone = _plan(tmp_path, columns=("no-waypoints",), steps=100)["train no-waypoints"]
+    assert alone.estimate_s == pytest.approx(100 * step + agents + synthesized)  # type: ignore[attr-defined]
+    after = _plan(tmp_path, columns=("tosvi", "no-waypoints"), steps=100)
+    assert after["train tosvi"].estimate_s == pytest.approx(100 * step + agents)  # type: ignore[attr-defined]
+    assert after["train no-waypoints"].estimate_s == pytest.approx(100 * step + synthesized)  # type: ignore[attr-defined]
+    # an earlier run's T-OSVI cache, without synthesized episodes, then with them
+    data = tmp_path / "data" / "train"
+    _collection_manifest(data, "pick_place", 30)
+    fingerprint = json.loads((data / "manifest.json").read_text())["fingerprint"]
+    path = cached_features_path(data, fingerprint, load_recipe("small"), "tosvi")
+    path.parent.mkdir()
+    with h5py.File(path, "w") as f:
+        f.create_group("agent/pick_place")
+    plan = _plan(tmp_path, columns=("no-waypoints",), steps=100)
+    assert plan["train no-waypoints"].estimate_s == pytest.approx(100 * step + synthesized)  # type: ignore[attr-defined]
+    with h5py.File(path, "a") as f:
+        f.create_group("synthesized/pick_place")
+    plan = _plan(tmp_path, columns=("no-waypoints",), steps=100)
+    assert plan["train no-waypoints"].estimate_s == pytest.approx(100 * step)  # type: ignore[attr-defined]
+
+
 def test_a_resumed_plan_estimates_only_what_is_left(tmp_path: Path) -> None:
     from awda_bench.data.config import CollectConfig
     from awda_bench.data.plan import make_plan
