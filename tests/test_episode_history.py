@@ -47,6 +47,7 @@ def test_an_episode_is_the_same_played_first_or_after_another() -> None:
     finally:
         reused.close()
     assert earlier.grasped and record_alone.grasped  # the fingers closed on an object in both
+    assert earlier.first_grip == record_alone.first_grip == "target"  # on the right one
     # without a rebuilt scene the second copy ends ~3e-3 away (measured), with one it is exact
     np.testing.assert_array_equal(state_after, state_alone)
     assert (record_after.steps, record_after.success_once, record_after.waypoints) == (

@@ -204,3 +204,31 @@ def test_reached_requires_proximity_before_the_first_grasp_attempt(env) -> None:
     assert bool(info["reached"][0]) and not bool(info["grasped"][0])
     base.objects[0].set_pose(Pose.create_from_pq(start + torch.tensor([[0.0, 0.0, 0.06]])))
     assert bool(base.evaluate()["grasped"][0])
+
+
+@pytest.mark.slow
+def test_a_grip_command_says_which_object_it_closes_on(env) -> None:
+    """``grip_outcome``: the nearest object within 4 cm of the TCP is the target (0) or another
+    one (1), or none is that near (2); an open-gripper action closes on nothing (-1)."""
+    from mani_skill.utils.structs.pose import Pose
+
+    base = env.unwrapped
+    env.reset(seed=2, options={"task": 0})  # task 0: object 0 into compartment 0
+    close = np.array([[0.0, 0.0, 0.0, 1.0]], dtype=np.float32)
+    assert int(base.grip_outcome(close)[0]) == 2  # at rest the TCP is far above the bin
+    assert int(base.grip_outcome(np.zeros((1, 4), np.float32))[0]) == -1
+    tcp = base.agent.tcp_pose.p
+
+    def under_fingers(j: int, gap_m: float) -> Pose:  # object j's top gap_m below the TCP
+        half_height = base.objects_spec[j].size_m[2] / 2
+        return Pose.create_from_pq(tcp - torch.tensor([[0.0, 0.0, half_height + gap_m]]))
+
+    base.objects[1].set_pose(under_fingers(1, 0.02))
+    distances, target = base.object_distances()
+    assert int(target[0]) == 0 and float(distances[0, 1]) == pytest.approx(0.02, abs=1e-4)
+    assert int(base.grip_outcome(close)[0]) == 1  # a distractor under the fingers
+    base.objects[0].set_pose(under_fingers(0, 0.01))
+    base.objects[1].set_pose(Pose.create_from_pq(tcp + torch.tensor([[0.3, 0.0, 0.0]])))
+    assert int(base.grip_outcome(close)[0]) == 0  # now the target
+    # asking changes nothing: the grasp attempt is latched by step() alone
+    assert not bool(base.evaluate()["grip_attempted"][0])

@@ -122,7 +122,8 @@ def test_tables_show_the_cells_and_flag_errors(run_dir: Path, tmp_path: Path) ->
     assert r"$\pm$" in (tmp_path / "s3.tex").read_text()
     grasp = (tmp_path / "grasp.csv").read_text()
     assert grasp.splitlines()[0] == (
-        "suite,method,episodes,reached,grasped,success,grasp_wp_spread_cm"
+        "suite,method,episodes,reached,grasped,success,first_grip_target,first_grip_other,"
+        "first_grip_nothing,first_grip_never,grasp_wp_spread_cm"
     )
 
 

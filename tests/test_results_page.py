@@ -15,7 +15,7 @@ import pytest
 from awda_bench.cli import main
 from awda_bench.errors import UsageError
 from awda_bench.harness import paper_values
-from awda_bench.harness.aggregate import ALL, S4_FAMILIES, mean_se
+from awda_bench.harness.aggregate import ALL, FIRST_GRIP_COLUMNS, S4_FAMILIES, mean_se
 from awda_bench.harness.bootstrap_ci import outcomes, stratified_bootstrap_ci, stratified_mean
 from awda_bench.harness.results_index import (
     ANALYSIS_KEYS,
@@ -25,7 +25,9 @@ from awda_bench.harness.results_index import (
 )
 from awda_bench.harness.results_page import (
     CI,
+    FIRST_GRIP,
     NO_RUN_YET,
+    NOT_RECORDED,
     NOT_RUN,
     OURS,
     PAGE_NAME,
@@ -461,6 +463,13 @@ def test_the_s3_analysis_rows_read_reached_and_grasped_beside_the_papers_reachin
     row = page.s3_analysis.loc["T-OSVI [1], mean action (`tosvi-mean`)"]
     assert (row["reached"], row["grasped"], row[OURS]) == ("0.40", "0.20", "0.10 ± 0.05")
     assert row["paper: reached"] == "0.11" and row["paper: success"] == "not given"
+    assert row[FIRST_GRIP] == NOT_RECORDED  # its grasp.csv predates the first-grip analysis
+    grasp = reports / "learned" / "tv" / "grasp.csv"
+    rows = pd.read_csv(grasp)
+    rows[list(FIRST_GRIP_COLUMNS.values())] = [0.05, 0.6, 0.25, 0.1]
+    rows.to_csv(grasp, index=False)
+    again = build_results_page(index).s3_analysis.loc["T-OSVI [1], mean action (`tosvi-mean`)"]
+    assert again[FIRST_GRIP] == "0.05 / 0.60 / 0.25 / 0.10"
     stack = page.s3_analysis.loc["T-OSVI [1], no frame-stack (`tosvi-no-frame-stack`)"]
     assert (stack[OURS], stack["note"]) == (NOT_RUN, NO_RUN_YET)
     assert stack["paper: reached"] == "0.12" and stack["paper: success"] == "0.01"

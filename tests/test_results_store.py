@@ -1,5 +1,6 @@
 import hashlib
 import sqlite3
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -99,7 +100,7 @@ def test_missing_and_foreign_files_are_one_line_errors(tmp_path: Path) -> None:
         ResultsStore(other, create=True)
 
 
-def test_a_store_from_before_the_privileged_flag_reads_and_gains_it(
+def test_a_store_from_before_the_privileged_flag_and_first_grip_reads_and_gains_them(
     tmp_path: Path, protocol
 ) -> None:
     from awda_bench.harness import results_store
@@ -107,7 +108,8 @@ def test_a_store_from_before_the_privileged_flag_reads_and_gains_it(
     run_dir = tmp_path / "old"
     run_dir.mkdir()
     old_schema = results_store._SCHEMA.replace("    privileged INTEGER,\n", "")
-    assert old_schema != results_store._SCHEMA
+    old_schema = old_schema.replace("    first_grip TEXT,\n", "")
+    assert "privileged" not in old_schema and "first_grip" not in old_schema
     with sqlite3.connect(run_dir / STORE_NAME) as db:
         db.executescript(old_schema)
         db.execute("INSERT INTO meta VALUES ('schema_version', ?)", (results_store.SCHEMA_VERSION,))
@@ -122,7 +124,11 @@ def test_a_store_from_before_the_privileged_flag_reads_and_gains_it(
     with ResultsStore(run_dir, create=False) as store:  # the report reads it as it is
         plan = store.snapshots()
         assert plan["privileged"].isna().all()
-    with ResultsStore(run_dir, create=True) as store:  # a run adds the column
+        assert "first_grip" in store.episodes().columns
+    with ResultsStore(run_dir, create=True) as store:  # a run adds the columns
         store.plan(protocol, "new", False, [SNAP], 8, "test", {}, privileged=True)
         flags = dict(store.raw("SELECT method, privileged FROM snapshots"))
+        store.record(protocol.fingerprint, replace(_record(0), first_grip="other"))
+        grips = store.episodes()["first_grip"].tolist()
     assert flags == {"old": None, "new": 1}
+    assert grips == ["other"]

@@ -73,7 +73,9 @@ class PickPlaceEnv(AWDATaskEnv):
       ``success_max_height_m`` above the compartment floor
     - grasp analysis (latched over the episode): ``reached`` = TCP within ``reach_threshold_m``
       of the target's surface before the gripper was first commanded closed; ``grasped`` =
-      reached, then the target raised at least ``lift_threshold_m`` above its start height
+      reached, then the target raised at least ``lift_threshold_m`` above its start height;
+      first grip (:meth:`grip_outcome`): which of the four objects, if any, was nearest within
+      ``reach_threshold_m`` when the gripper was first commanded closed
     """
 
     family = "pick_place"
@@ -188,6 +190,12 @@ class PickPlaceEnv(AWDATaskEnv):
         """(n,) TCP distance to the target object's surface [m]."""
         pos, quat = self.target_pose()
         return self._target_surface_distance(self.agent.tcp_pose.p, pos, quat)
+
+    def object_distances(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(n, 4) TCP distance to each object's surface [m] and (n,) the target's column."""
+        pos, quat = self.object_poses()
+        distances = distance_to_objects(self.agent.tcp_pose.p, pos, quat, self.objects_spec)
+        return distances, self.target_object_index
 
     def _target_surface_distance(
         self, points: torch.Tensor, target_pos: torch.Tensor, target_quat: torch.Tensor

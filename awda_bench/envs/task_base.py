@@ -98,6 +98,12 @@ class AWDATaskEnv(ExactStateEnv):
         """(n,) TCP distance to the grasp target [m]; override for a surface distance."""
         return torch.linalg.norm(self.agent.tcp_pose.p - self.target_position(), dim=1)
 
+    def object_distances(self) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """``((n, k) TCP distance to each object a grip could take [m], (n,) the target's
+        column)`` for the first-grip analysis (:meth:`grip_outcome`); ``None`` (this default):
+        the task does not tell."""
+        return None
+
     def is_grasping_target(self) -> torch.Tensor:
         """(n,) simulator truth: the fingers hold the target (contact forces)."""
         return torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
@@ -195,16 +201,43 @@ class AWDATaskEnv(ExactStateEnv):
         return qpos[:, -2] + qpos[:, -1]
 
     # ------------------------------------------------------------------ step hooks
+    def _grip_commanded(self, action: Any) -> torch.Tensor | None:
+        """(n,) bool: does ``action`` (as :meth:`step` takes it) command the gripper closed?
+        ``None`` for an action that is not one (dx, dy, dz, grip) row per env."""
+        if action is None or isinstance(action, dict):
+            return None
+        a = torch.as_tensor(np.asarray(action) if not isinstance(action, torch.Tensor) else action)
+        if a.numel() != self.num_envs * 4:
+            return None
+        return self.embodiment.grip_closed(a.to(self.device).reshape(self.num_envs, 4).float())
+
+    def grip_outcome(self, action: Any) -> torch.Tensor | None:
+        """(n,) int: what ``action`` would close the gripper on from the current state, an index
+        into :data:`~awda_bench.episode.GRIP_OUTCOMES` (the nearest object within
+        ``reach_threshold_m`` of the TCP is the target or another one, or none is that near), -1
+        where it does not close the gripper. ``None`` where the task does not tell
+        (:meth:`object_distances`) or ``action`` is not one row per env. The harness asks this
+        before each step until the first grip: what the policy went for."""
+        closing = self._grip_commanded(action)
+        if closing is None:
+            return None
+        if not bool(closing.any()):
+            return torch.full_like(closing, -1, dtype=torch.long)
+        measured = self.object_distances()
+        if measured is None:
+            return None
+        distances, target = measured
+        nearest, which = distances.min(dim=1)
+        outcome = torch.where(which == target, 0, 1)  # GRIP_OUTCOMES: target, other
+        outcome = torch.where(nearest <= self.reach_threshold_m, outcome, 2)  # nothing
+        return torch.where(closing, outcome, -1)
+
     def _step_action(self, action: Any) -> Any:
         # latch the grasp attempt on the commanded action; "reached" is latched by evaluate() on
         # every state (reset and after each step), with the attempts commanded up to that state
-        if action is not None and not isinstance(action, dict):
-            a = torch.as_tensor(
-                np.asarray(action) if not isinstance(action, torch.Tensor) else action
-            )
-            if a.numel() == self.num_envs * 4:
-                a = a.to(self.device).reshape(self.num_envs, 4).float()
-                self.grip_attempted |= self.embodiment.grip_closed(a)
+        closing = self._grip_commanded(action)
+        if closing is not None:
+            self.grip_attempted |= closing
         return super()._step_action(action)
 
     def evaluate(self) -> dict:

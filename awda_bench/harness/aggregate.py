@@ -18,6 +18,8 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import pandas as pd
 
+from awda_bench.episode import GRIP_OUTCOMES, NEVER_GRIPPED
+
 METRICS = ("success_once", "success_at_end")
 """Success columns a report can use."""
 
@@ -214,11 +216,21 @@ def grasp_waypoint_spread_cm(episodes: pd.DataFrame) -> float | None:
     return float(np.mean(spreads)) if spreads else None
 
 
+FIRST_GRIP_COLUMNS: dict[str, str] = {
+    outcome: f"first_grip_{outcome}" for outcome in (*GRIP_OUTCOMES, NEVER_GRIPPED)
+}
+"""grasp.csv's column of each first-grip outcome's rate: ``first_grip_target``, ``_other``,
+``_nothing``, ``_never``."""
+
+
 def grasp_analysis(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
     """Per (suite, method): reached / grasped / success rates over the ok episodes of tasks with a
     grasp target (those whose env reports both flags; in MOSAIC: stack block, basketball, nut
     assembly). Where no episode reports them the rates are ``None`` and success is over all ok
-    episodes. ``grasp_wp_spread_cm``: :func:`grasp_waypoint_spread_cm` over all ok episodes.
+    episodes. ``first_grip_*`` (:data:`FIRST_GRIP_COLUMNS`): the rate of each ``first_grip``
+    outcome over those of the episodes that recorded one (``None`` where none did: a task that
+    does not tell, or a store written before the analysis). ``grasp_wp_spread_cm``:
+    :func:`grasp_waypoint_spread_cm` over all ok episodes.
     """
     ok = episodes[episodes["status"] == "ok"]
     out = []
@@ -229,12 +241,16 @@ def grasp_analysis(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
         for column in ("reached", "grasped"):
             row[column] = float(graspable[column].mean()) if len(graspable) else None
         row["success"] = float(rows[metric].mean())
+        told = graspable["first_grip"].dropna() if "first_grip" in g else pd.Series(dtype=object)
+        for outcome, column in FIRST_GRIP_COLUMNS.items():
+            row[column] = float((told == outcome).mean()) if len(told) else None
         row["grasp_wp_spread_cm"] = grasp_waypoint_spread_cm(g)
         out.append(row)
     return pd.DataFrame(
         out,
         columns=[
-            "suite", "method", "episodes", "reached", "grasped", "success", "grasp_wp_spread_cm"
+            "suite", "method", "episodes", "reached", "grasped", "success", *FIRST_GRIP_COLUMNS.values(),
+            "grasp_wp_spread_cm",
         ],
     )  # fmt: skip
 

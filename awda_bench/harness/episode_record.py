@@ -41,6 +41,9 @@ class EpisodeRecord:
     """End-effector came within reach of the target before any grasp (``None``: not reported)."""
     grasped: bool | None = None
     """Reached, then lifted the target (``None``: env does not say)."""
+    first_grip: str | None = None
+    """What the gripper was first commanded closed on: one of
+    :data:`~awda_bench.episode.GRIP_OUTCOMES` or ``"never"`` (``None``: the task does not tell)."""
     steps: int = 0
     """Control steps played."""
     wall_time_s: float = 0.0

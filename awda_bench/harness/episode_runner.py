@@ -9,6 +9,8 @@
         stop after T = suite.horizon_steps steps, or once policy.done
     success_once   = any_t info_t["success"]      success_at_end = info_T["success"]
     reached/grasped = info_T["reached"/"grasped"] (the envs latch them), None if absent
+    first_grip     = env.grip_outcome(a_t) at the first t whose a_t closes the gripper
+                     (before that step), "never" if none does, None if the task does not tell
 
 Every episode starts in a freshly built scene (``reconfigure``, ~0.2 s on pick-place): PhysX
 carries contact caches and solver state from one episode of a scene into the next, and
@@ -29,6 +31,8 @@ from typing import Any, Protocol
 import numpy as np
 
 from awda_bench.episode import (
+    GRIP_OUTCOMES,
+    NEVER_GRIPPED,
     EpisodeContext,
     EpisodeSpec,
     Observations,
@@ -118,11 +122,18 @@ def run_episode(
 
     success_once = False
     success_now = bool(info_flag(info, "success"))
+    grip_outcome = getattr(env.unwrapped, "grip_outcome", None)
+    tells_grip = grip_outcome is not None and env.unwrapped.object_distances() is not None
+    first_grip = NEVER_GRIPPED if tells_grip else None
     steps = 0
     while steps < suite.horizon_steps and not policy.done:
         t0 = time.perf_counter()
         action = policy.act(obs if privileged else observations)
         t1 = time.perf_counter()
+        if first_grip == NEVER_GRIPPED and grip_outcome is not None:
+            outcome = grip_outcome(action)
+            if outcome is not None and int(outcome[0]) >= 0:
+                first_grip = GRIP_OUTCOMES[int(outcome[0])]
         obs, _reward, _terminated, _truncated, info = env.step(action)
         observations.mark_stepped()
         env_time += time.perf_counter() - t1
@@ -148,6 +159,7 @@ def run_episode(
         success_at_end=success_now,
         reached=info_flag(info, "reached"),
         grasped=info_flag(info, "grasped"),
+        first_grip=first_grip,
         steps=steps,
         wall_time_s=time.perf_counter() - t_start,
         act_time_s=act_time,

@@ -195,6 +195,8 @@ def write_report(
         (
             "grasp",
             "Grasp analysis (rates over ok episodes of tasks with a grasp target; – = none reports "
+            "it; first_grip_*: what the gripper was first commanded closed on, the target, "
+            "another object or nothing within reach, or never, over the episodes that recorded "
             "it; grasp_wp_spread_cm: how far the predicted grasp point moves across a task's "
             "episodes, near 0 for a network that ignores its images)",
             grasp,

@@ -28,7 +28,7 @@ import pandas as pd
 
 from awda_bench.errors import CorruptFileError, UsageError
 from awda_bench.harness import bootstrap_ci, tables
-from awda_bench.harness.aggregate import ALL, S4_FAMILIES, Cell, family_key
+from awda_bench.harness.aggregate import ALL, FIRST_GRIP_COLUMNS, S4_FAMILIES, Cell, family_key
 from awda_bench.harness.episode_specs import PROTOCOL_VERSION, protocol_drift
 from awda_bench.harness.methods import get_method
 from awda_bench.harness.paper_values import (
@@ -65,6 +65,10 @@ TOX_COMMAND = "tox -e report -- --results-page"
 """The same through tox."""
 
 NOT_RUN = "not run"
+NOT_RECORDED = "not recorded"
+"""A first-grip cell of a source evaluated before episodes recorded their first grip."""
+FIRST_GRIP = "first grip: target / other / nothing / never"
+"""The §S3 analysis column of first-grip rates (:data:`~awda_bench.harness.aggregate.FIRST_GRIP_COLUMNS`)."""
 """What a cell without a source says (its note says why)."""
 
 NO_RUN_YET = "no run yet"
@@ -445,7 +449,10 @@ class ResultsPage:
             "policy reaches the wrong object). Its values are in its text, not a table; the "
             "baseline's own reaching rate is not given. Ours: reached and grasped are the rates "
             "of `grasp.csv` (all of the label's episodes), success is the cell's mean ± SE over "
-            "snapshots.",
+            "snapshots. First grip: of the same episodes, the rates of what the gripper was "
+            "first commanded closed on, the target (the nearest object within 4 cm of the TCP), "
+            "another object, nothing within 4 cm, or never (episodes record it since "
+            "2026-12-05; a source evaluated before says not recorded).",
             "",
             tables.to_markdown(self.s3_analysis),
             "## Table S4: MOSAIC, success on each held-out family",
@@ -691,6 +698,7 @@ class _Builder:
             row = {
                 "reached": "–",
                 "grasped": "–",
+                FIRST_GRIP: "–",
                 OURS: NOT_RUN,
                 f"{PAPER}: reached": paper.get("reached", "not given"),
                 f"{PAPER}: success": paper.get(
@@ -704,14 +712,29 @@ class _Builder:
                 rates = self.rates(entry)
                 if rates is not None:
                     row["reached"], row["grasped"] = (f"{r:.2f}" for r in rates[:2])
+                row[FIRST_GRIP] = self.first_grips(entry)
                 row[OURS] = cell.ours()
                 row[SOURCE] = _sources(cell)
             rows.append(row)
             index.append(f"{title} (`{key}`)")
         columns = [
-            "reached", "grasped", OURS, f"{PAPER}: reached", f"{PAPER}: success", SOURCE, NOTE,
+            "reached", "grasped", FIRST_GRIP, OURS, f"{PAPER}: reached", f"{PAPER}: success",
+            SOURCE, NOTE,
         ]  # fmt: skip
         return pd.DataFrame(rows, index=pd.Index(index, name="column"), columns=columns)
+
+    def first_grips(self, entry: SourceEntry) -> str:
+        """``target / other / nothing / never`` rates of the entry's label from its grasp.csv,
+        or :data:`NOT_RECORDED` where it has none (a source evaluated before the analysis)."""
+        g = self.report(entry).grasp
+        match = g[(g["suite"] == entry.suite) & (g["method"] == entry.label)]
+        columns = list(FIRST_GRIP_COLUMNS.values())
+        if match.empty or not set(columns) <= set(g.columns):
+            return NOT_RECORDED
+        rates = match.iloc[0][columns]
+        if rates.isna().any():
+            return NOT_RECORDED
+        return " / ".join(f"{float(r):.2f}" for r in rates)
 
     def rates(self, entry: SourceEntry) -> tuple[float, float, float, int] | None:
         """``(reached, grasped, success, episodes)`` of the entry's label from its grasp.csv, or

@@ -71,6 +71,7 @@ CREATE TABLE IF NOT EXISTS episodes (
     success_at_end INTEGER,
     reached INTEGER,
     grasped INTEGER,
+    first_grip TEXT,
     steps INTEGER NOT NULL,
     wall_time_s REAL NOT NULL,
     act_time_s REAL NOT NULL,
@@ -106,6 +107,7 @@ EPISODE_COLUMNS = (
     "success_at_end",
     "reached",
     "grasped",
+    "first_grip",
     "steps",
     "wall_time_s",
     "act_time_s",
@@ -114,6 +116,13 @@ EPISODE_COLUMNS = (
     "error",
     "waypoints",
 )
+
+ADDED_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("snapshots", "privileged", "INTEGER"),
+    ("episodes", "first_grip", "TEXT"),
+)
+"""(table, column, type) added since schema 1 without bumping it: an older store opened to
+write gains them; one opened to read shows them as NULL."""
 
 
 def _bool(value: bool | None) -> int | None:
@@ -162,7 +171,7 @@ class ResultsStore:
                     "use another run directory"
                 )
             if create:
-                self._add_privileged_column()
+                self._add_missing_columns()
                 self._conn.execute("PRAGMA journal_mode=WAL")
                 # WAL + NORMAL: a commit survives the process being killed (only an OS crash or
                 # power loss can drop the last commits); no fsync per episode
@@ -176,12 +185,14 @@ class ResultsStore:
             self._conn.executescript(_SCHEMA)
             self._conn.execute("INSERT INTO meta VALUES ('schema_version', ?)", (SCHEMA_VERSION,))
 
-    def _add_privileged_column(self) -> None:
-        """A store written before methods declared privilege gains the column (NULL: unknown)."""
-        columns = {r[1] for r in self._conn.execute("PRAGMA table_info(snapshots)")}
-        if "privileged" not in columns:
-            with self._conn:
-                self._conn.execute("ALTER TABLE snapshots ADD COLUMN privileged INTEGER")
+    def _add_missing_columns(self) -> None:
+        """A store written before a column existed gains it (NULL: unknown): ``privileged``
+        (before methods declared privilege), ``first_grip`` (before the first-grip analysis)."""
+        for table, column, kind in ADDED_COLUMNS:
+            columns = {r[1] for r in self._conn.execute(f"PRAGMA table_info({table})")}
+            if column not in columns:
+                with self._conn:
+                    self._conn.execute(f"ALTER TABLE {table} ADD COLUMN {column} {kind}")
 
     def close(self) -> None:
         self._conn.close()
@@ -291,6 +302,7 @@ class ResultsStore:
             _bool(rec.success_at_end),
             _bool(rec.reached),
             _bool(rec.grasped),
+            rec.first_grip,
             rec.steps,
             rec.wall_time_s,
             rec.act_time_s,
@@ -315,9 +327,13 @@ class ResultsStore:
     # --- reading -------------------------------------------------------------------------------
 
     def episodes(self) -> pd.DataFrame:
-        return pd.read_sql_query(
+        """Every episode row; ``first_grip`` is NULL (unknown) in a store written before it."""
+        rows = pd.read_sql_query(
             "SELECT * FROM episodes ORDER BY protocol, method, snapshot, task, episode", self._conn
         )
+        if "first_grip" not in rows.columns:
+            rows["first_grip"] = None
+        return rows
 
     def snapshots(self) -> pd.DataFrame:
         """The plan; ``privileged`` is NULL (unknown) in a store written before it existed."""
