@@ -320,6 +320,26 @@ def test_restored_scene_continues_like_the_original(env: gym.Env) -> None:
 
 
 @pytest.mark.slow
+def test_every_grasp_task_tells_the_first_grip_and_its_target_column_is_the_target(
+    env: gym.Env,
+) -> None:
+    """``object_distances`` (the first-grip analysis) of a task with a grasp target: one column
+    per object, the target's equal to ``target_distance``; a task without one does not tell."""
+    base = env.unwrapped
+    env.reset(seed=3, options={"task": _variation(env, 1)})
+    for action in _actions(env, 2, seed=3):
+        env.step(action)
+    measured = base.object_distances() if hasattr(base, "object_distances") else None
+    if not getattr(base, "has_grasp_target", False):
+        assert measured is None
+        return
+    assert measured is not None
+    distances, target = measured
+    assert distances.shape[0] == 1 and distances.shape[1] >= 2 and (distances >= 0).all()
+    torch.testing.assert_close(distances[0, target[0]], base.target_distance()[0])
+
+
+@pytest.mark.slow
 def test_nan_action_is_rejected(env: gym.Env) -> None:
     env.reset(seed=0)
     action = np.zeros(4, dtype=np.float32)

@@ -242,6 +242,12 @@ class BasketballEnv(AWDATaskEnv):
         d = torch.linalg.norm(self.agent.tcp_pose.p - self.target_position(), dim=1)
         return torch.clamp(d - self.target_radius(), min=0.0)
 
+    def object_distances(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(n, 3) TCP distance to each ball's surface [m] (0 inside) and (n,) the target's
+        column."""
+        d = torch.linalg.norm(self.agent.tcp_pose.p[:, None] - self.ball_positions(), dim=2)
+        return torch.clamp(d - self._radii, min=0.0), self.target_ball_index
+
     def is_grasping_target(self) -> torch.Tensor:
         """(n,) simulator truth: both fingers press on the target ball."""
         idx = self.target_ball_index

@@ -304,9 +304,24 @@ class NutAssemblyEnv(AWDATaskEnv):
     def target_distance(self) -> torch.Tensor:
         """(n,) TCP distance to the target nut's box (body + handle) [m] (0 inside)."""
         pos, quat = self.target_pose()
+        return self._box_distance(pos, quat, self.target_nut_index)
+
+    def object_distances(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(n, 3) TCP distance to each nut's box [m] (0 inside) and (n,) the target's column."""
+        pos, quat = self.nut_poses()
+        every = torch.arange(len(self.nuts), device=self.device)
+        distances = [
+            self._box_distance(pos[:, j], quat[:, j], every[j].expand(self.num_envs))
+            for j in range(len(self.nuts))
+        ]
+        return torch.stack(distances, dim=1), self.target_nut_index
+
+    def _box_distance(
+        self, pos: torch.Tensor, quat: torch.Tensor, nut: torch.Tensor
+    ) -> torch.Tensor:
+        """(n,) TCP distance to the box (body + handle) of nut ``nut`` (n,) at ``pos``/``quat``."""
         local = rotate(quat, self.agent.tcp_pose.p - pos, inverse=True)
-        idx = self.target_nut_index
-        lo, hi = self._bounds_lo[idx], self._bounds_hi[idx]
+        lo, hi = self._bounds_lo[nut], self._bounds_hi[nut]
         outside = torch.clamp(lo - local, min=0.0) + torch.clamp(local - hi, min=0.0)
         return torch.linalg.norm(outside, dim=1)
 

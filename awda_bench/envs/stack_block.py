@@ -193,6 +193,11 @@ class StackBlockEnv(AWDATaskEnv):
         """(n,) TCP distance to cube A's surface [m]."""
         return self._distance_to(self._per_env_cube(self.cube_a, lambda c: c.pose.raw_pose))
 
+    def object_distances(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """(n, 3) TCP distance to each cube's surface [m] and (n,) cube A's column."""
+        distances = [self._distance_to(cube.pose.raw_pose) for cube in self.cubes]
+        return torch.stack(distances, dim=1), self.cube_a
+
     def _distance_to(self, raw_pose: torch.Tensor) -> torch.Tensor:
         """(n,) TCP distance to the surface of the cubes at ``raw_pose`` (n, 7) [m]."""
         pos, quat = raw_pose[:, None, :3], raw_pose[:, None, 3:]
