@@ -726,12 +726,11 @@ class _Builder:
     def first_grips(self, entry: SourceEntry) -> str:
         """``target / other / nothing / never`` rates of the entry's label from its grasp.csv,
         or :data:`NOT_RECORDED` where it has none (a source evaluated before the analysis)."""
-        g = self.report(entry).grasp
-        match = g[(g["suite"] == entry.suite) & (g["method"] == entry.label)]
+        match = self.grasp_row(entry)
         columns = list(FIRST_GRIP_COLUMNS.values())
-        if match.empty or not set(columns) <= set(g.columns):
+        if match is None or not set(columns) <= set(match.index):
             return NOT_RECORDED
-        rates = match.iloc[0][columns]
+        rates = match[columns]
         if rates.isna().any():
             return NOT_RECORDED
         return " / ".join(f"{float(r):.2f}" for r in rates)
@@ -739,12 +738,16 @@ class _Builder:
     def rates(self, entry: SourceEntry) -> tuple[float, float, float, int] | None:
         """``(reached, grasped, success, episodes)`` of the entry's label from its grasp.csv, or
         ``None`` where its tasks report no grasp flags."""
+        r = self.grasp_row(entry)
+        if r is None or pd.isna(r["reached"]):
+            return None
+        return float(r["reached"]), float(r["grasped"]), float(r["success"]), int(r["episodes"])
+
+    def grasp_row(self, entry: SourceEntry) -> pd.Series | None:
+        """The entry's label's row of its source's grasp.csv (``None``: the label has none)."""
         g = self.report(entry).grasp
         match = g[(g["suite"] == entry.suite) & (g["method"] == entry.label)]
-        if match.empty or pd.isna(match.iloc[0]["reached"]):
-            return None
-        r = match.iloc[0]
-        return float(r["reached"]), float(r["grasped"]), float(r["success"]), int(r["episodes"])
+        return None if match.empty else match.iloc[0]
 
     def s4(self) -> pd.DataFrame:
         keys = ["full-1"] + [
