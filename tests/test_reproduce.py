@@ -19,15 +19,13 @@ import pytest
 
 from awda_bench.cli import main
 from awda_bench.errors import ProtocolMismatchError, UnknownChoiceError, UsageError
-from awda_bench.reproduce import (
+from awda_bench.reproduce.config import ReproduceConfig, parse_columns
+from awda_bench.reproduce.plan import Stage, plan_stages
+from awda_bench.reproduce.stages import (
     LOCK_FILE,
     STAGE_TIMES,
-    ReproduceConfig,
-    Stage,
     StageAttempt,
     pace_line,
-    parse_columns,
-    plan_stages,
     read_stage_times,
     run_stages,
     stage_totals,
@@ -85,7 +83,7 @@ def test_the_summary_names_the_command_that_decides_the_same_config(tmp_path: Pa
     import shlex
 
     from awda_bench.commands import reproduce as command
-    from awda_bench.reproduce import command_line
+    from awda_bench.reproduce.summary import command_line
 
     parser = argparse.ArgumentParser()
     command.add_parser(parser.add_subparsers())
@@ -163,7 +161,7 @@ def _collection_manifest(
     from awda_bench.data.collect import MANIFEST, _manifest
     from awda_bench.data.config import CollectConfig
     from awda_bench.data.plan import make_plan
-    from awda_bench.reproduce import default_synthesize
+    from awda_bench.reproduce.config import default_synthesize
 
     config = CollectConfig(
         suite=suite, split="train", embodiment="both", episodes_per_task=episodes_per_task,
@@ -245,7 +243,7 @@ def test_bad_input_is_one_line_exit_2(
 def test_metaworld_collects_without_synthesis_and_evaluates_the_five_held_out_tasks(
     tmp_path: Path, capsys
 ) -> None:
-    from awda_bench.reproduce import _paper_cell
+    from awda_bench.reproduce.summary import paper_cell
 
     out = tmp_path / "rep"
     argv = ["reproduce", "--suite", "metaworld", "--columns", "full-1,tosvi", "--out", str(out)]
@@ -259,8 +257,8 @@ def test_metaworld_collects_without_synthesis_and_evaluates_the_five_held_out_ta
     collect = stages["collect train"].argv
     assert "--synthesize" not in collect or collect[collect.index("--synthesize") + 1] == "0"
     config = ReproduceConfig(suite="metaworld", out=out)
-    assert _paper_cell(config, "full-1") == ".48 ± .05"  # Table S3, Meta-World [all]
-    assert _paper_cell(ReproduceConfig(suite="pick_place", out=out), "full-1") == "1.0 ± .00"
+    assert paper_cell(config, "full-1") == ".48 ± .05"  # Table S3, Meta-World [all]
+    assert paper_cell(ReproduceConfig(suite="pick_place", out=out), "full-1") == "1.0 ± .00"
 
 
 def test_columns_parse_in_the_given_order() -> None:
@@ -401,7 +399,9 @@ def test_stopping_reproduce_stops_the_stage_and_its_workers_and_logs_it(
         "import sys\n"
         "from pathlib import Path\n"
         "from awda_bench.errors import AwdaError\n"
-        "from awda_bench.reproduce import ReproduceConfig, Stage, run_stages\n"
+        "from awda_bench.reproduce.config import ReproduceConfig\n"
+        "from awda_bench.reproduce.plan import Stage\n"
+        "from awda_bench.reproduce.stages import run_stages\n"
         f"stage = Stage('train full-1', [{SLEEPER!r}, {str(pids)!r}], 1.0, False)\n"
         f"config = ReproduceConfig(suite='pick_place', out=Path({str(tmp_path)!r}))\n"
         "try:\n"
@@ -443,7 +443,7 @@ def _alive(pid: int) -> bool:
 def test_the_plan_encodes_each_feature_cache_once(tmp_path: Path) -> None:
     """T-OSVI-style columns share one cache of pooled maps: the plan counts its encoding for the
     first of them only, and not at all once the file is there; a one-frame T-OSVI steps faster."""
-    from awda_bench.reproduce import COSTS
+    from awda_bench.reproduce.costs import COSTS
     from awda_bench.training.recipe import load_recipe
     from awda_bench.training.run import cached_features_path
 
@@ -479,7 +479,7 @@ def test_the_plan_counts_the_synthesized_frames_no_waypoints_adds_to_the_cache(
     cache file that lacks them does not count as built for it."""
     import h5py
 
-    from awda_bench.reproduce import COSTS
+    from awda_bench.reproduce.costs import COSTS
     from awda_bench.training.recipe import load_recipe
     from awda_bench.training.run import cached_features_path
 
@@ -511,7 +511,7 @@ def test_a_resumed_plan_estimates_only_what_is_left(tmp_path: Path) -> None:
     from awda_bench.data.config import CollectConfig
     from awda_bench.data.plan import make_plan
     from awda_bench.data.trajectory_file import shard_dir
-    from awda_bench.reproduce import COSTS
+    from awda_bench.reproduce.costs import COSTS
 
     frozen = _plan(tmp_path, columns=("full-1",), steps=100)  # small: + encoding the cache once
     encode = COSTS.encode_frame_s * (420 * 11 + 200 * 10)

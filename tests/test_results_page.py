@@ -405,12 +405,12 @@ def test_a_cell_with_no_run_says_why_and_how_to_fill_it(reports: Path) -> None:
 
 
 def test_every_reproduce_column_is_a_page_column_and_shares_the_paper_values() -> None:
-    from awda_bench import reproduce
+    from awda_bench.reproduce import config, summary
 
-    trained_or_played = set(reproduce.COLUMN_KEYS) | set(reproduce.EVAL_VARIANTS)
+    trained_or_played = set(config.COLUMN_KEYS) | set(config.EVAL_VARIANTS)
     assert trained_or_played == set(LEARNED_KEYS) | set(ANALYSIS_KEYS)
-    assert reproduce.PAPER_S3_PICK_PLACE is paper_values.PAPER_S3_PICK_PLACE
-    assert reproduce.PAPER_S4 is paper_values.PAPER_S4
+    assert summary.PAPER_S3_PICK_PLACE is paper_values.PAPER_S3_PICK_PLACE
+    assert summary.PAPER_S4 is paper_values.PAPER_S4
 
 
 def test_regenerate_command_is_read_from_the_source_notes(tmp_path: Path) -> None:

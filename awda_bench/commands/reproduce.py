@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from awda_bench.primitives.config import GRASP_SELECTS
-from awda_bench.reproduce import (
+from awda_bench.reproduce.config import (
     COLUMN_KEYS,
     DEFAULT_COLUMNS,
     DEFAULT_EPISODES_PER_TASK,
@@ -15,12 +15,11 @@ from awda_bench.reproduce import (
     SUITE_EPISODES_PER_TASK,
     SUITES,
     ReproduceConfig,
-    format_plan,
     parse_columns,
-    plan_stages,
-    run_stages,
-    write_summary,
 )
+from awda_bench.reproduce.plan import format_plan, plan_stages
+from awda_bench.reproduce.stages import run_stages
+from awda_bench.reproduce.summary import write_summary
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:

@@ -1,0 +1,65 @@
+"""The per-unit wall times behind ``reproduce``'s printed plan, and how a duration is printed."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class Costs:
+    """Per-unit wall times [s] for the printed estimate (2-core CPU machine, idle, 2026-11)."""
+
+    collect_episode_s: float = 1.75
+    """Per kept episode with 2 workers at 240x320 (pick-place: 760 episodes in 1314 s on an idle
+    fresh machine, pick_place-small-v4; 1588-2154 s beside other work)."""
+    train_step_s: dict[str, float] = field(
+        default_factory=lambda: {"awda": 2.23, "tosvi": 3.16, "tosvi-depth": 4.7}
+    )
+    """Per step of the ``small`` recipe, 2 threads (``recipes/small.toml`` has the measurements)."""
+    frozen_step_s: float = 0.3
+    """Per step of a frozen-backbone recipe over cached features (``small``: median compute
+    0.28 s a step on the idle machine in pick_place-small-v4 and -v7, plus ~0.01 s of data;
+    0.49-0.65 s beside another job, -v5; batch 16, 2 threads)."""
+    frozen_tosvi_step_s: dict[str, float] = field(
+        default_factory=lambda: {"tosvi": 0.8, "tosvi-depth": 1.6}
+    )
+    """Per T-OSVI step over cached maps pooled 2x2 (``small``: batch 16, 2 threads), with
+    ``train``'s denormal flush (:mod:`awda_bench.models.denormals`): the median compute of a real
+    run's steps on the idle machine, 0.77 s + 0.01 s of data (pick-place v8, steps 1401-3000,
+    2026-12-03). Without the flush a step grew with training (0.9 -> 3.1 s over v8's first 600
+    steps; the 1.4 s this plan used before came from such runs). tosvi-depth (which trains its
+    depth ResNet-18 over 96 wrist depth images a step) is not measured since the attention fix:
+    it is scaled by the ratio measured before it (10.7 s vs 5.3 s at 1 thread beside a 2-thread
+    job)."""
+    frozen_tosvi_one_frame_step_s: float = 0.49
+    """The same for a one-frame T-OSVI (``tosvi-no-frame-stack``): 0.485 s a step (median
+    compute 0.47 s), pick-place's default collection, 2026-12-04, with the test suite running at
+    the lowest priority beside it for ~17 of its 24.6 minutes (so an idle figure may be lower)."""
+    agent_episode_steps: float = 62.4
+    """Mean steps of a kept pick-place agent episode (T-OSVI caches every agent frame; the
+    20-per-task train split: 17,472 steps in 280 episodes)."""
+    synthesized_episode_frames: float = 23.5
+    """Frames a T-OSVI-style column that trains on the synthesized episodes (``no-waypoints``)
+    adds to the pooled cache per synthesized episode (every step, as agent stacks, plus its demo
+    frames): 4,701 frames for pick-place's 200, session 25."""
+    encode_frame_s: float = 0.035
+    """Encoding one 240x320 frame into the feature cache (pick-place's T-OSVI cache: 20,272
+    frames at ~29 frames/s, pick_place-small-v6; 0.077 s beside another job)."""
+    paper_step_factor: float = 32.0
+    """``paper`` recipe step cost ÷ ``small``'s on a CPU (~71 s vs 2.23 s)."""
+    eval_episode_s: dict[str, float] = field(
+        default_factory=lambda: {"awda": 1.5, "tosvi": 16.5, "tosvi-depth": 27.5}
+    )
+    """Per evaluated episode and worker, 2 workers on the 2 cores (awda: open loop, one forward
+    pass; tosvi: a frame and a forward pass every step for the whole horizon; measured on
+    pick-place: 120 T-OSVI episodes of 180 steps at 16.5 s each per worker; tosvi-depth:
+    ``bench episode-cost`` alone, 1 worker, gives 22.0 s beside tosvi's 13.2 s, scaled by the
+    same 1.25 to two workers)."""
+
+
+COSTS = Costs()
+
+
+def clock(seconds: float) -> str:
+    minutes = round(seconds / 60.0)
+    return f"{minutes // 60} h {minutes % 60:02d} min" if minutes >= 60 else f"{minutes} min"
