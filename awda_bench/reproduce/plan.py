@@ -194,6 +194,14 @@ def _eval_tasks(suite_name: str, hold_out: str | None) -> tuple[list[int], int]:
     return [], units
 
 
+def _collect_stage(name: str, collect: CollectConfig, total: int, noun: str, done: bool) -> Stage:
+    """``collect NAME``: ``collect``'s command, ``total`` episodes, the ones still to record timed."""
+    left = _collect_remaining(collect)
+    estimate = left * COSTS.collect_episode_s * 2 / collect.workers
+    detail = f"{total} {noun}" + (f", {left} left" if 0 < left < total else "")
+    return Stage(name, _collect_argv(collect), estimate, done, detail, collect)
+
+
 def _eval_stage(key: str, evaluate: SweepConfig, left: int, arch: str, detail: str) -> Stage:
     """``evaluate KEY``: ``evaluate``'s ``run`` command, ``left`` episodes to play (done at 0)."""
     estimate = left * COSTS.eval_episode_s[arch] / evaluate.workers
@@ -236,15 +244,10 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         episodes_per_task=config.demos_per_task, synthesize=synthesize, out=data,
         workers=config.workers, progress=config.progress,
     )  # fmt: skip
-    left_train = _collect_remaining(collect_train)
     stages.append(
-        Stage(
-            "collect train",
-            _collect_argv(collect_train),
-            left_train * COSTS.collect_episode_s * 2 / config.workers,
+        _collect_stage(
+            "collect train", collect_train, n_train, "episodes",
             _collection_done(data, "train", config.demos_per_task, synthesize),
-            f"{n_train} episodes" + (f", {left_train} left" if 0 < left_train < n_train else ""),
-            collect_train,
         )
     )  # fmt: skip
     val: list[str] = []
@@ -255,16 +258,10 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             episodes_per_task=config.val_episodes_per_task, out=test, workers=config.workers,
             progress=config.progress,
         )  # fmt: skip
-        left_test = _collect_remaining(collect_test)
         stages.append(
-            Stage(
-                "collect test",
-                _collect_argv(collect_test),
-                left_test * COSTS.collect_episode_s * 2 / config.workers,
+            _collect_stage(
+                "collect test", collect_test, n_test, "validation episodes",
                 _collection_done(test, "test", config.val_episodes_per_task, 0),
-                f"{n_test} validation episodes"
-                + (f", {left_test} left" if 0 < left_test < n_test else ""),
-                collect_test,
             )
         )  # fmt: skip
         val = ["--val-data", str(test)]
