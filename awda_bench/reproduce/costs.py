@@ -21,16 +21,17 @@ class Costs:
     0.28 s a step on the idle machine in pick_place-small-v4 and -v7, plus ~0.01 s of data;
     0.49-0.65 s beside another job, -v5; batch 16, 2 threads)."""
     frozen_tosvi_step_s: dict[str, float] = field(
-        default_factory=lambda: {"tosvi": 0.8, "tosvi-depth": 1.6}
+        default_factory=lambda: {"tosvi": 0.8, "tosvi-depth": 3.1}
     )
     """Per T-OSVI step over cached maps pooled 2x2 (``small``: batch 16, 2 threads), with
     ``train``'s denormal flush (:mod:`awda_bench.models.denormals`): the median compute of a real
     run's steps on the idle machine, 0.77 s + 0.01 s of data (pick-place v8, steps 1401-3000,
     2026-12-03). Without the flush a step grew with training (0.9 -> 3.1 s over v8's first 600
     steps; the 1.4 s this plan used before came from such runs). tosvi-depth (which trains its
-    depth ResNet-18 over 96 wrist depth images a step) is not measured since the attention fix:
-    it is scaled by the ratio measured before it (10.7 s vs 5.3 s at 1 thread beside a 2-thread
-    job)."""
+    depth ResNet-18 over 96 wrist depth images a step): 3.05 s median compute + 0.03 s of data,
+    alone on the idle machine (pick-place default collection, steps 6-121, 2026-12-05); the 1.6 s
+    this plan used before was scaled from a ratio measured before the attention fix and
+    undercounted it by 1.9x."""
     frozen_tosvi_one_frame_step_s: float = 0.49
     """The same for a one-frame T-OSVI (``tosvi-no-frame-stack``): 0.485 s a step (median
     compute 0.47 s), pick-place's default collection, 2026-12-04, with the test suite running at
