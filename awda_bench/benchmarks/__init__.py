@@ -12,6 +12,8 @@ primitives      primitive + executor overhead per env step, wrist-depth localiza
 throughput      ``bench harness``: episodes/minute per worker count and backend, harness overhead,
                 beside the machine's own ceiling (:mod:`.core_scaling`)
 episode_cost    ``bench episode-cost``: wall time, rendered frames and inference of one episode
+render_cost     ``bench render-cost``: a frame's render time per render body, and with the robot's
+                visual meshes decimated
 inference       a learned model's forward-pass latency
 soft_dtw        the multi-waypoint Soft-DTW loss per implementation (and its share of a step)
 metaworld       Meta-World frames (the models' render settings vs fast) and the scripted policies'

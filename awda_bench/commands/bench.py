@@ -8,6 +8,7 @@ imports the chosen one alone, so the CLI starts fast):
     primitives  primitive + executor overhead per env step, rendered frames per episode
     harness     episodes/minute with 1 and 2 workers, harness overhead share
     episode-cost  per method: wall s, frames rendered, inference ms of one evaluated episode
+    render-cost   a frame's render time per render body (and with the robot's meshes decimated)
     inference   waypoint network forward latency
     soft-dtw    the multi-waypoint Soft-DTW loss per implementation (and its share of a step)
     serve       a served policy: loopback round trip per step, episodes/min served vs in-process
@@ -50,6 +51,12 @@ BENCHMARKS: dict[str, tuple[str, str, str, bool]] = {
         "run_episode_cost_bench",
         True,
     ),
+    "render-cost": (
+        "awda_bench.benchmarks.render_cost",
+        "add_render_cost_args",
+        "run_render_cost_bench",
+        True,
+    ),
     "inference": (
         "awda_bench.benchmarks.inference",
         "add_inference_args",
@@ -75,7 +82,8 @@ BENCHMARKS: dict[str, tuple[str, str, str, bool]] = {
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "bench",
-        help="speed benchmarks (controller, env, primitives, harness, episode-cost, inference, "
+        help="speed benchmarks (controller, env, primitives, harness, episode-cost, render-cost, "
+        "inference, "
         "soft-dtw, serve, metaworld)",
         description="Run one benchmark; 'bench NAME --help' lists its options.",
     )

@@ -41,7 +41,8 @@ class CaptureCounter:
         self.frames = 0
 
 
-def _sensor(env, uid: str):
+def camera_sensor(env, uid: str):
+    """Env ``env``'s sensor ``uid`` (a ManiSkill ``Camera``); unknown uids get the list."""
     sensors = env.unwrapped.scene.sensors
     if uid not in sensors:
         raise UnknownChoiceError("camera", uid, sorted(sensors))
@@ -58,7 +59,7 @@ def _count(env) -> None:
 
 def capture_rgb(env, uid: str = THIRD_PERSON_CAMERA) -> np.ndarray:
     """Render camera ``uid`` now: ``(n, H, W, 3)`` uint8 RGB."""
-    sensor = _sensor(env, uid)
+    sensor = camera_sensor(env, uid)
     env.unwrapped.scene.update_render()
     sensor.capture()
     _count(env)
@@ -69,7 +70,7 @@ def capture_rgb(env, uid: str = THIRD_PERSON_CAMERA) -> np.ndarray:
 def camera_params(env, uid: str = THIRD_PERSON_CAMERA) -> tuple[np.ndarray, np.ndarray]:
     """Camera ``uid``'s ``intrinsic_cv`` (3, 3) and world-to-camera ``extrinsic_cv`` (3, 4) of env
     0 (OpenCV conventions), as float64."""
-    params = _sensor(env, uid).get_params()
+    params = camera_sensor(env, uid).get_params()
     out = []
     for key in ("intrinsic_cv", "extrinsic_cv"):
         value = params[key]
@@ -81,7 +82,7 @@ def camera_params(env, uid: str = THIRD_PERSON_CAMERA) -> tuple[np.ndarray, np.n
 
 def capture_wrist_depth(env, uid: str = WRIST_CAMERA) -> DepthFrame:
     """Render the wrist depth camera now."""
-    sensor = _sensor(env, uid)
+    sensor = camera_sensor(env, uid)
     env.unwrapped.scene.update_render()
     sensor.capture()
     _count(env)
