@@ -34,14 +34,14 @@ def test_every_body_is_listed_and_the_decimated_robot_keeps_the_picture(tmp_path
     args = _args("--frames", "2", "--decimate", "0.1", "--out", str(tmp_path))
     assert run_render_cost_bench(args) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines[0].startswith("pick_place task 0, camera third_person 240x320")
+    assert lines[0].startswith("pick_place task 0 (agent: panda_awda), camera third_person 240x320")
     header = lines.index(next(x for x in lines if x.startswith("render body (alone)")))
-    robot_line = next(i for i, x in enumerate(lines) if x.startswith("agent robot:"))
+    robot_line = next(i for i, x in enumerate(lines) if x.startswith("robot:"))
     bodies = {x.split()[0]: int(x.split()[1]) for x in lines[header + 1 : robot_line]}
     # the Panda's links, the table and the task's objects, each with its triangles
     assert {"panda_link0", "panda_hand", "panda_leftfinger", "scene-0_ground"} <= set(bodies)
     robot_triangles = sum(n for name, n in bodies.items() if name.startswith("panda_"))
-    assert lines[robot_line].startswith(f"agent robot: {robot_triangles} triangles")
+    assert lines[robot_line].startswith(f"robot: {robot_triangles} triangles")
     decimated = lines[robot_line + 1].split()
     assert decimated[:4] == ["robot", "decimated", "to", "0.1:"]
     before, after = int(decimated[4]), int(decimated[6])

@@ -2,7 +2,8 @@
 
 On lavapipe (Mesa's CPU Vulkan) a frame costs ~25-35 ms whatever its size (SPEC §1), which is most
 of a closed-loop policy's episode (``bench episode-cost``). This benchmark takes one suite scene
-(``--task``, reset with seed 0) and times ``camera.capture()`` (the render; ``update_render`` and the
+(``--task``, reset with seed 0; ``--embodiment`` picks the agent's robot or the
+demonstrator's) and times ``camera.capture()`` (the render; ``update_render`` and the
 read-back cost ~0.01 and ~0.2 ms) with
 
 - the whole scene visible;
@@ -12,7 +13,7 @@ read-back cost ~0.01 and ~0.2 ms) with
 Hiding is ``RenderBodyComponent.visibility = 0``, which the renderer culls (a hidden scene costs
 what a scene without render bodies does).
 
-``--decimate RATIO`` (repeatable) also measures the agent robot's visual meshes simplified to
+``--decimate RATIO`` (repeatable) also measures the robot's visual meshes simplified to
 ``RATIO`` of their triangles (quadric decimation: ``trimesh``'s ``simplify_quadric_decimation``,
 which needs the ``fast-simplification`` package), side by side with the original meshes in the
 same scene (both attached, one visible at a time, timed in alternating rounds), and how far the
@@ -40,6 +41,12 @@ DIFF_THRESHOLD = 16
 def add_render_cost_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--suite", default="pick_place", help="suite (default pick_place)")
     parser.add_argument("--task", type=int, default=0, help="task of the timed scene (default 0)")
+    parser.add_argument(
+        "--embodiment",
+        choices=("agent", "demonstrator"),
+        default="agent",
+        help="whose robot the scene holds (default agent: the Panda the policies drive)",
+    )
     parser.add_argument(
         "--camera",
         default=None,
@@ -120,7 +127,7 @@ def _decimated_body(body: Any, ratio: float) -> Any:
 
 
 def _robot_entities(env: Any) -> set[str]:
-    """Entity names of the agent robot's links."""
+    """Entity names of the scene robot's links (the agent's or the demonstrator's)."""
     return {link.name for link in env.unwrapped.agent.robot.get_links()} | {
         obj.entity.name for link in env.unwrapped.agent.robot.get_links() for obj in link._objs
     }
@@ -131,7 +138,7 @@ def _compare_decimated(env: Any, sensor: Any, capture: Any, ratio: float, args: 
     robot = _robot_entities(env)
     originals = [(n, b) for n, b in _render_bodies(env) if n in robot]
     if not originals:
-        raise UsageError("this scene's agent robot has no render bodies to decimate")
+        raise UsageError("this scene's robot has no render bodies to decimate")
     copies = []
     for _, body in originals:
         copy = _decimated_body(body, ratio)
@@ -177,7 +184,7 @@ def _compare_decimated(env: Any, sensor: Any, capture: Any, ratio: float, args: 
 def run_render_cost_bench(args: argparse.Namespace) -> int:
     import torch
 
-    from awda_bench.harness.env_factory import make_env
+    from awda_bench.demo_recording import make_demo_env
     from awda_bench.harness.episode_runner import fresh_scene_options
     from awda_bench.robot.cameras import THIRD_PERSON_CAMERA, camera_sensor, capture_rgb
     from awda_bench.suites import load_suite
@@ -202,7 +209,7 @@ def run_render_cost_bench(args: argparse.Namespace) -> int:
     if not 0 <= args.task < len(suite.tasks):
         raise UsageError(f"--task must be in 0..{len(suite.tasks) - 1} (got {args.task})")
     uid = args.camera or THIRD_PERSON_CAMERA
-    env = make_env(suite)
+    env = make_demo_env(suite, args.embodiment, env_id=suite.env_id_for(args.task))
     env.reset(seed=0, options=fresh_scene_options(suite, args.task))
     sensor = camera_sensor(env, uid)
     first = capture_rgb(env, uid)  # builds the render pipeline (seconds)
@@ -223,8 +230,8 @@ def run_render_cost_bench(args: argparse.Namespace) -> int:
     whole = _capture_ms(env, sensor, args.frames)
     h, w = first.shape[1:3]
     print(
-        f"{suite.name} task {args.task}, camera {uid} {h}x{w}: median of {args.frames} captures, "
-        f"1 torch thread"
+        f"{suite.name} task {args.task} ({args.embodiment}: {env.unwrapped.robot_uids}), camera "
+        f"{uid} {h}x{w}: median of {args.frames} captures, 1 torch thread"
     )
     print(f"whole scene {whole:.1f} ms a frame; nothing visible {fixed:.1f} ms (fixed cost)")
     print(f"{'render body (alone)':<32} {'triangles':>9} {'+ms':>7}")
@@ -234,7 +241,7 @@ def run_render_cost_bench(args: argparse.Namespace) -> int:
     robot_ms = sum(extra for name, _, extra in rows if name in robot)
     robot_tris = sum(tris for name, tris, _ in rows if name in robot)
     print(
-        f"agent robot: {robot_tris} triangles, {robot_ms:.1f} ms of the bodies' "
+        f"robot: {robot_tris} triangles, {robot_ms:.1f} ms of the bodies' "
         f"{sum(r[2] for r in rows):.1f} ms (each alone; together {whole - fixed:.1f} ms)"
     )
     for ratio in args.decimate:
