@@ -100,7 +100,8 @@ def _show(bodies: list[tuple[str, Any]], visible: set[int]) -> None:
 
 def _decimated_body(body: Any, ratio: float) -> Any:
     """A new render body with ``body``'s shapes, each part simplified to ``ratio`` of its triangles
-    (parts under 1,000 triangles are kept), same materials, poses and scales, smooth normals."""
+    (parts under 1,000 triangles are kept), same materials, poses and scales, flat-shaded like the
+    mesh files (every triangle its own three vertices and its face normal)."""
     import sapien
     import trimesh
 
@@ -112,11 +113,13 @@ def _decimated_body(body: Any, ratio: float) -> Any:
                 mesh.merge_vertices()  # the mesh files split vertices at hard edges
                 mesh = mesh.simplify_quadric_decimation(percent=1.0 - ratio)
                 mesh.fix_normals()
-            vertices = np.asarray(mesh.vertices, dtype=np.float32)
+            # flat shading, as the mesh files are (every triangle its own three vertices)
+            vertices = np.asarray(mesh.vertices[mesh.faces].reshape(-1, 3), dtype=np.float32)
+            normals = np.repeat(np.asarray(mesh.face_normals, dtype=np.float32), 3, axis=0)
             new = sapien.render.RenderShapeTriangleMesh(
                 vertices,
-                np.asarray(mesh.faces, dtype=np.uint32),
-                np.asarray(mesh.vertex_normals, dtype=np.float32),
+                np.arange(len(vertices), dtype=np.uint32).reshape(-1, 3),
+                normals,
                 np.zeros((len(vertices), 2), dtype=np.float32),
                 part.material,
             )
