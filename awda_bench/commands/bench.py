@@ -83,8 +83,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser = subparsers.add_parser(
         "bench",
         help="speed benchmarks (controller, env, primitives, harness, episode-cost, render-cost, "
-        "inference, "
-        "soft-dtw, serve, metaworld)",
+        "inference, soft-dtw, serve, metaworld)",
         description="Run one benchmark; 'bench NAME --help' lists its options.",
     )
     parser.add_argument("benchmark", metavar="BENCHMARK", help=f"one of: {', '.join(BENCHMARKS)}")
