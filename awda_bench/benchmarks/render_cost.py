@@ -131,9 +131,7 @@ def _decimated_body(body: Any, ratio: float) -> Any:
 
 def _robot_entities(env: Any) -> set[str]:
     """Entity names of the scene robot's links (the agent's or the demonstrator's)."""
-    return {link.name for link in env.unwrapped.agent.robot.get_links()} | {
-        obj.entity.name for link in env.unwrapped.agent.robot.get_links() for obj in link._objs
-    }
+    return {link.name for link in env.unwrapped.agent.robot.get_links()}
 
 
 def _compare_decimated(env: Any, sensor: Any, capture: Any, ratio: float, args: Any) -> str:
@@ -217,11 +215,9 @@ def run_render_cost_bench(args: argparse.Namespace) -> int:
     sensor = camera_sensor(env, uid)
     first = capture_rgb(env, uid)  # builds the render pipeline (seconds)
     bodies = _render_bodies(env)
-    everything = set(range(len(bodies)))
 
     def capture() -> np.ndarray:
-        env.unwrapped.scene.update_render()
-        return capture_rgb(env, uid)[0]
+        return capture_rgb(env, uid)[0]  # syncs the scene to the renderer itself
 
     _show(bodies, set())
     fixed = _capture_ms(env, sensor, args.frames)
@@ -229,7 +225,7 @@ def run_render_cost_bench(args: argparse.Namespace) -> int:
     for index, (name, body) in enumerate(bodies):
         _show(bodies, {index})
         rows.append((name, _triangles(body), _capture_ms(env, sensor, args.frames) - fixed))
-    _show(bodies, everything)
+    _show(bodies, set(range(len(bodies))))
     whole = _capture_ms(env, sensor, args.frames)
     h, w = first.shape[1:3]
     print(
