@@ -430,6 +430,49 @@ def test_stopping_reproduce_stops_the_stage_and_its_workers_and_logs_it(
     assert attempt.outcome == f"interrupted ({stop.name})" and attempt.wall_s > 0
 
 
+IDENTITY = """
+import os, sys
+from pathlib import Path
+autogroup = Path("/proc/self/autogroup")
+nice = autogroup.read_text().split()[-1] if autogroup.is_file() else "-"
+Path(sys.argv[1]).write_text(f"{os.getpid()} {os.getpgid(0)} {os.getsid(0)} {nice}")
+"""
+
+
+def test_a_stage_runs_in_its_own_group_but_keeps_reproduces_priority(tmp_path: Path) -> None:
+    """``nice python -m awda_bench reproduce`` must stay nice: the stage gets its own process group
+    (for the stop signals) but stays in reproduce's session, so on Linux it shares reproduce's
+    scheduler autogroup rather than starting a new one at nice 0."""
+    seen = tmp_path / "seen"
+    driver = (
+        "import os, sys\n"
+        "from pathlib import Path\n"
+        "from awda_bench.reproduce.config import ReproduceConfig\n"
+        "from awda_bench.reproduce.plan import Stage\n"
+        "from awda_bench.reproduce.stages import run_stages\n"
+        "autogroup = Path('/proc/self/autogroup')\n"
+        "if autogroup.is_file():\n"
+        "    autogroup.write_text('5')\n"
+        f"stage = Stage('train full-1', [{IDENTITY!r}, {str(seen)!r}], 1.0, False)\n"
+        f"config = ReproduceConfig(suite='pick_place', out=Path({str(tmp_path)!r}))\n"
+        "run_stages(config, [stage], command=(sys.executable, '-c'))\n"
+        "print(os.getsid(0))\n"
+    )
+    done = subprocess.run(  # its own session, so the autogroup it sets is not this test's
+        [sys.executable, "-c", driver],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        start_new_session=True,
+    )
+    assert done.returncode == 0, done.stderr
+    pid, group, session, nice = seen.read_text().split()
+    assert group == pid  # its own group: killpg stops it and its workers, nothing else
+    assert session == done.stdout.split()[-1]  # reproduce's session
+    if nice != "-":  # a kernel with autogroups: the stage is scheduled as reproduce is
+        assert nice == "5"
+
+
 def _alive(pid: int) -> bool:
     try:
         os.kill(pid, 0)

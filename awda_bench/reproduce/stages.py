@@ -161,7 +161,10 @@ def run_stages(
             write_stage_times(config.out, log)
             start = time.perf_counter()
             received: list[int] = []
-            child = subprocess.Popen(argv, start_new_session=True)
+            # its own process group (stop signals reach its workers; Ctrl-C reaches this process
+            # alone) in this session: a new session would be a new scheduler autogroup on Linux,
+            # at nice 0 whatever ``nice`` this run was started under
+            child = subprocess.Popen(argv, process_group=0)
             with _forward_stop_signals(child, received):
                 while True:
                     try:
