@@ -3,7 +3,8 @@
 read unchanged, deterministic, resumable.
 
 The tiny collection: train tasks 30 (pick-place-v3: a grasp) and 43 (reach-v3), one episode per
-role, 64x64 frames and 32x32 wrist depth, recorded once per module with 2 workers. Tests marked
+role and one synthesized trajectory per task, 64x64 frames and 32x32 wrist depth, recorded once
+per module with 2 workers. Tests marked
 ``needs_metaworld`` are skipped without ``.venv-metaworld`` (except under CI, where set-up made it).
 """
 
@@ -20,7 +21,7 @@ from metaworld_env import needs_metaworld
 
 from awda_bench.cli import main
 from awda_bench.data.collect import MANIFEST, run_collect
-from awda_bench.data.config import CollectConfig
+from awda_bench.data.config import METAWORLD_SYNTHESIS, CollectConfig
 from awda_bench.data.datasets import AwdaPairDataset, CollectedData, TosviDataset
 from awda_bench.data.plan import make_plan
 from awda_bench.errors import UsageError
@@ -40,6 +41,7 @@ def tiny_config(out: Path, workers: int = 2) -> CollectConfig:
         image_size=(64, 64),
         depth_size=(32, 32),
         tasks=(PICK, REACH),
+        synthesize=2,
         progress=False,
     )
 
@@ -83,7 +85,6 @@ def test_plan_is_the_45_train_tasks_at_the_suite_camera_size(tmp_path: Path) -> 
     ("args", "needle"),
     [
         (["--workers", "0"], "--workers >= 1"),
-        (["--synthesize", "3"], "--synthesize is not implemented on 'metaworld'"),
         (["--task", "30", "--split", "test"], "not in the 'test' split"),
         (["--image-size", "32x32"], "use at least 64x64"),
     ],
@@ -131,8 +132,10 @@ def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
 @needs_metaworld
 def test_collection_is_maniskill_trajectory_files(tiny: Path) -> None:
     manifest = json.loads((tiny / MANIFEST).read_text())
-    assert manifest["complete"] and manifest["counts"]["kept"] == 4
+    assert manifest["complete"] and manifest["counts"]["kept"] == 6
     for unit in manifest["units"]:
+        if unit["role"] == "synthesized":
+            continue  # test_synthesized_trajectories_are_feasible_free_space_motion
         h5_path = tiny / unit["file"]
         meta = json.loads(h5_path.with_suffix(".json").read_text())
         name = "pick-place-v3" if unit["task"] == PICK else "reach-v3"
@@ -179,7 +182,7 @@ def test_collection_is_maniskill_trajectory_files(tiny: Path) -> None:
 def test_the_training_datasets_read_it(tiny: Path) -> None:
     data = CollectedData(tiny)
     pairs = AwdaPairDataset(data)
-    assert len(pairs) == 2  # one agent x one demonstrator episode per task
+    assert len(pairs) == 4  # one agent x one demonstrator episode per task, 2 synthesized
     sample = pairs[0]
     assert sample["demo"].shape == (10, 3, 64, 64) and sample["first_frame"].shape == (3, 64, 64)
     assert sample["trajectory"].shape == (50, 4)
@@ -196,6 +199,68 @@ def test_the_training_datasets_read_it(tiny: Path) -> None:
     item = tosvi[0]
     assert item["frames"].shape == (6, 3, 64, 64) and item["actions"].shape == (6, 4)
     assert item["depth"].shape == (6, 1, 32, 32)
+    data.close()
+
+
+@pytest.mark.slow
+@needs_metaworld
+def test_synthesized_trajectories_are_feasible_free_space_motion(tiny: Path) -> None:
+    """The Sawyer reaches every drawn waypoint (within the motion's 2 mm), inside the Meta-World
+    box, with the hand open: no grasp is mined; head 1, and the wrist depth of an agent episode."""
+    box = METAWORLD_SYNTHESIS
+    synthesized = [u for u in json.loads((tiny / MANIFEST).read_text())["units"]
+                   if u["role"] == "synthesized"]  # fmt: skip
+    assert sorted(u["task"] for u in synthesized) == [PICK, REACH]
+    for unit in synthesized:
+        h5_path = tiny / unit["file"]
+        (episode,) = json.loads(h5_path.with_suffix(".json").read_text())["episodes"]
+        waypoints = np.asarray(episode["waypoints"])
+        assert 1 <= len(waypoints) <= 3 and all(episode["waypoints_reached"])
+        assert np.all(waypoints >= box.low_m) and np.all(waypoints <= box.high_m)
+        assert episode["head"] == 1 and episode["role"] == "synthesized"
+        with h5py.File(h5_path, "r") as f:
+            g = f["traj_0"]
+            tcp = g["obs/extra/tcp_pose"][:, :3]
+            for waypoint in waypoints:  # the recorded path passes through each waypoint
+                assert np.linalg.norm(tcp - waypoint, axis=1).min() < 0.003
+            assert not g["attributes/grasp"][:].any()  # the hand never closed
+            assert np.all(g["actions"][:, 3] < 0)  # Meta-World's "open" every step
+            assert np.all(g["obs/extra/gripper_opening_m"][:] > 0.035)
+            assert g["obs/sensor_data/wrist_depth/depth"].shape[0] == len(tcp)
+    # the plan's definition names Meta-World's box, not pick-and-place's
+    definition = json.loads((tiny / MANIFEST).read_text())["definition"]
+    assert definition["synthesis"]["low_m"] == list(box.low_m)
+
+
+@pytest.mark.slow
+@needs_metaworld
+def test_a_training_batch_mixes_both_heads_by_origin(tiny: Path) -> None:
+    """Head 0 for the task-driven pairs, head 1 for the synthesized (self-paired) ones, in one
+    batch, and the network's waypoints for each sample come from that sample's head."""
+    import torch
+
+    from awda_bench.models.awda_net import AwdaNet
+    from awda_bench.models.config import AwdaConfig, TrunkConfig
+
+    data = CollectedData(tiny)
+    pairs = AwdaPairDataset(data)
+    batch = torch.utils.data.default_collate([pairs[i] for i in range(len(pairs))])
+    origin = [agent.role for agent, _demo, _head in pairs.pairs]
+    assert batch["head"].tolist() == [1 if r == "synthesized" else 0 for r in origin]
+    assert sorted(batch["head"].tolist()) == [0, 0, 1, 1]
+    for agent, demo, head in pairs.pairs:  # a synthesized trajectory is its own demonstration
+        assert (agent == demo) == (head == 1)
+    torch.manual_seed(0)
+    trunk = TrunkConfig(image_height_px=64, image_width_px=64, backbone_weights="none")
+    model = AwdaNet(AwdaConfig(trunk=trunk)).eval()
+    with torch.no_grad():
+        mixed = model(batch["demo"], batch["first_frame"], batch["head"])
+        flipped = model(batch["demo"], batch["first_frame"], 1 - batch["head"])
+        for i, head in enumerate(batch["head"].tolist()):
+            alone = model(batch["demo"][i : i + 1], batch["first_frame"][i : i + 1],
+                          torch.tensor([head]))  # fmt: skip
+            torch.testing.assert_close(mixed[i], alone[0], rtol=1e-4, atol=1e-4)
+    assert float((mixed - flipped).abs().max()) > 1e-3  # the heads differ
     data.close()
 
 
@@ -236,7 +301,7 @@ def test_a_killed_collection_resumes_only_what_is_missing(tiny: Path, tmp_path: 
     lost.with_suffix(".h5").unlink()  # killed before this unit was consolidated
     lost.with_suffix(".json").unlink()
     result = run_collect(tiny_config(copy, workers=1))
-    assert result.complete and result.already == 3 and result.kept == 1
+    assert result.complete and result.already == 5 and result.kept == 1
     ours, theirs = arrays_of(tiny), arrays_of(copy)
     assert ours.keys() == theirs.keys()
     assert all(np.array_equal(v, theirs[k]) for k, v in ours.items())

@@ -19,6 +19,7 @@ import pytest
 
 from awda_bench.cli import main
 from awda_bench.errors import ProtocolMismatchError, UnknownChoiceError, UsageError
+from awda_bench.harness.sweep import SweepConfig
 from awda_bench.reproduce.config import ReproduceConfig, parse_columns
 from awda_bench.reproduce.plan import Stage, plan_stages
 from awda_bench.reproduce.stages import (
@@ -240,7 +241,7 @@ def test_bad_input_is_one_line_exit_2(
     assert not out.exists()
 
 
-def test_metaworld_collects_without_synthesis_and_evaluates_the_five_held_out_tasks(
+def test_metaworld_collects_with_synthesis_and_evaluates_the_five_held_out_tasks(
     tmp_path: Path, capsys
 ) -> None:
     from awda_bench.reproduce.summary import paper_cell
@@ -249,16 +250,34 @@ def test_metaworld_collects_without_synthesis_and_evaluates_the_five_held_out_ta
     argv = ["reproduce", "--suite", "metaworld", "--columns", "full-1,tosvi", "--out", str(out)]
     assert main([*argv, "--dry-run"]) == 0
     text = capsys.readouterr().out
-    # 45 training tasks x 20 x 2 roles, no synthesized ones (not implemented on Meta-World)
-    assert "1800 episodes" in text and "50 validation episodes" in text
+    # 45 training tasks x 20 x 2 roles, and 450 synthesized (10 per env)
+    assert "2250 episodes" in text and "50 validation episodes" in text
     assert "10 snapshots x 20 episodes x 5 tasks" in text
     assert not out.exists()
     stages = {s.name: s for s in plan_stages(ReproduceConfig(suite="metaworld", out=out))}
     collect = stages["collect train"].argv
-    assert "--synthesize" not in collect or collect[collect.index("--synthesize") + 1] == "0"
+    assert collect[collect.index("--synthesize") + 1] == "450"
     config = ReproduceConfig(suite="metaworld", out=out)
     assert paper_cell(config, "full-1") == ".48 ± .05"  # Table S3, Meta-World [all]
     assert paper_cell(ReproduceConfig(suite="pick_place", out=out), "full-1") == "1.0 ± .00"
+
+
+def test_the_fit_check_plays_the_held_out_tasks_training_siblings(tmp_path: Path) -> None:
+    from awda_bench.reproduce.config import fit_check_tasks
+    from awda_bench.suites import load_suite
+
+    metaworld = load_suite("metaworld")
+    siblings = fit_check_tasks(metaworld)
+    names = [metaworld.task(i).family for i in siblings]
+    # one training sibling per held-out task, named like it
+    assert names == ["button-press-topdown", "door-close", "pick-place", "sweep", "window-close"]
+    assert all(metaworld.task(i) in metaworld.train_tasks for i in siblings)
+    stages = {s.name: s for s in plan_stages(ReproduceConfig(suite="metaworld", out=tmp_path))}
+    fit = stages["evaluate full-1 on training tasks"]
+    assert isinstance(fit.config, SweepConfig)
+    assert fit.config.tasks == siblings and fit.config.split == "train"
+    # pick-and-place's held-out tasks are variations of the training family: its first two tasks
+    assert fit_check_tasks(load_suite("pick_place")) == (0, 1)
 
 
 def test_columns_parse_in_the_given_order() -> None:

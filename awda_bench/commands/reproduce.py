@@ -61,7 +61,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--synthesize",
         type=int,
         default=None,
-        help="synthesized trajectories (default 200; 0 on Meta-World, which has no synthesis)",
+        help="synthesized trajectories (default 200; 450 on Meta-World, 10 per training env)",
     )
     parser.add_argument("--snapshots", type=int, default=10, help="last N snapshots (default 10)")
     parser.add_argument(

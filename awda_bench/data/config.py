@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
+
+import numpy as np
 
 from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.suites import SUITES_DIR, Suite
@@ -80,6 +82,34 @@ class SynthesisConfig:
         if self.settle_steps < 0:
             raise UsageError(f"SynthesisConfig.settle_steps must be >= 0, got {self.settle_steps}")
 
+    def draw_waypoints(self, seed: int) -> np.ndarray:
+        """``(K, 3)`` waypoints [m] uniform in the box, ``K`` uniform in ``min_waypoints ..
+        max_waypoints``, from a generator seeded with ``seed`` (the attempt's)."""
+        rng = np.random.default_rng(seed)
+        count = int(rng.integers(self.min_waypoints, self.max_waypoints + 1))
+        return rng.uniform(self.low_m, self.high_m, size=(count, 3))
+
+
+METAWORLD_SYNTHESIS = SynthesisConfig(low_m=(-0.25, 0.45, 0.10), high_m=(0.25, 0.80, 0.30))
+"""Trajectory synthesis on Meta-World (its world frame [m]: table top z = 0, the Sawyer's base at
+y = 0, the hand starting near (0, 0.6, 0.2)). The box lies inside every task's hand and mocap
+workspace (Meta-World's ``hand_low`` / ``mocap_low`` (-0.5, 0.40, 0.05), ``hand_high`` /
+``mocap_high`` (0.5, 1.0, 0.5)) and over the table's part that the corner4 camera sees and the
+tasks' objects occupy; its floor (10 cm) is above the pucks, blocks and handles the hand would
+otherwise push, but not above the fixtures that stand up to ~30 cm (doors, shelves, the hoop,
+the window frame): a motion the hand cannot finish (blocked by a fixture, or the fixture moved)
+does not reach its waypoint within the motion's step budget, and the episode is discarded and
+replaced like a failed expert episode (``collect``'s discard count says how many). The hand moves
+open, as the reference's synthesized motion (no grasps): the grasp attribute is mined from the
+recorded trajectory with the experts' miner all the same, so a hand that closed on something
+would be labelled as such."""
+
+
+def synthesis_for(suite: Suite) -> SynthesisConfig:
+    """The synthesis box of ``suite``'s world: :data:`METAWORLD_SYNTHESIS` on Meta-World's suites,
+    :class:`SynthesisConfig`'s defaults (pick-and-place's bins) on the ManiSkill ones."""
+    return METAWORLD_SYNTHESIS if suite.simulator == "metaworld" else SynthesisConfig()
+
 
 @dataclass(frozen=True)
 class CollectConfig:
@@ -124,8 +154,9 @@ class CollectConfig:
     """A unit gives up (error) after ``factor * episodes + 10`` attempts: the expert is broken."""
     episode_timeout_s: float = 600.0
     """Watchdog: an episode running longer is killed and recorded as an error [s]."""
-    synthesis: SynthesisConfig = field(default_factory=SynthesisConfig)
-    """Trajectory synthesis parameters."""
+    synthesis: SynthesisConfig | None = None
+    """Trajectory synthesis parameters; ``None``: the suite's (:func:`synthesis_for`). See
+    :meth:`synthesis_config`."""
     suites_dir: Path = SUITES_DIR
     """Where suite files live."""
     progress: bool = True
@@ -163,6 +194,10 @@ class CollectConfig:
         if self.image_size is not None:
             return self.image_size
         return (suite.camera.height, suite.camera.width)
+
+    def synthesis_config(self, suite: Suite) -> SynthesisConfig:
+        """The synthesis parameters used on ``suite``: :attr:`synthesis` or the suite's own."""
+        return self.synthesis if self.synthesis is not None else synthesis_for(suite)
 
     @property
     def expert_roles(self) -> tuple[str, ...]:

@@ -37,7 +37,11 @@ What differs from the ManiSkill collection, and why:
   carries contact caches between episodes); Meta-World's reset clears the whole simulation, so an
   attempt records the same whatever was played before (``tests/test_metaworld_suite.py``), and
   :meth:`MetaWorldRecorder.replay` does nothing.
-- **No trajectory synthesis** (refused by :func:`~awda_bench.data.plan.make_plan`).
+- **Trajectory synthesis** (``synthesized`` units, agent role, head 1): the hand driven open
+  through 1-3 random waypoints of :data:`~awda_bench.data.config.METAWORLD_SYNTHESIS` in the task's
+  seeded layout (:mod:`awda_bench.metaworld.synthesis`), recorded like an agent episode (frames,
+  wrist depth, states, Meta-World's actions, the grasp mined by the same miner); kept when every
+  waypoint was reached, ending ``settle_steps`` after the last one.
 """
 
 from __future__ import annotations
@@ -47,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.data.config import ROLE_AGENT, ROLE_DEMONSTRATOR, CollectConfig
+from awda_bench.data.config import ROLE_AGENT, ROLE_DEMONSTRATOR, ROLE_SYNTHESIZED, CollectConfig
 from awda_bench.data.plan import Attempt, code_sha256
 from awda_bench.data.recorder import EpisodeArrays, EpisodeData
 from awda_bench.suites import Suite, load_suite
@@ -117,6 +121,7 @@ class MetaWorldRecorder:
         """Play and record ``job`` on ``env``; exceptions propagate (the pool reports them)."""
         from awda_bench.metaworld.rollout import expert_rollout
         from awda_bench.metaworld.sawyer import SAWYER_GRASP_MINING, STEP_M, mocap_offset
+        from awda_bench.metaworld.synthesis import synthesized_rollout
         from awda_bench.mining import mine_grasp
 
         t_start = time.perf_counter()
@@ -140,13 +145,34 @@ class MetaWorldRecorder:
         def capture(_t: int = 0) -> None:
             self._capture(env, arrays)
 
-        rollout = expert_rollout(
-            task_env,
-            env.task_name,
-            self.suite.horizon_steps,
-            mocap_offset(task_env),
-            before_step=capture,
-        )
+        extra_meta: dict[str, Any]
+        if job.role == ROLE_SYNTHESIZED:
+            synthesis = self.config.synthesis_config(self.suite)
+            waypoints = synthesis.draw_waypoints(job.seed)
+            synthesized = synthesized_rollout(
+                task_env,
+                waypoints,
+                self.suite.horizon_steps,
+                synthesis.settle_steps,
+                before_step=capture,
+            )
+            rollout = synthesized.rollout
+            kept = all(synthesized.reached)
+            extra_meta = {
+                "expert_done": False,
+                "waypoints": waypoints.tolist(),
+                "waypoints_reached": synthesized.reached,
+            }
+        else:
+            rollout = expert_rollout(
+                task_env,
+                env.task_name,
+                self.suite.horizon_steps,
+                mocap_offset(task_env),
+                before_step=capture,
+            )
+            kept = bool(rollout.success.any())
+            extra_meta = {"expert_done": kept}
         capture()  # state T
         for action, success in zip(rollout.env_actions, rollout.success, strict=True):
             arrays.add_action(action, bool(success))
@@ -156,7 +182,7 @@ class MetaWorldRecorder:
             "grasp": mine_grasp(rollout.trajectory, SAWYER_GRASP_MINING),
             "press": np.zeros(T, dtype=bool),
         }
-        data = arrays.finish(job, success_once, attributes)
+        data = arrays.finish(job, kept, attributes)
         flags = {"success": bool(rollout.success[-1]), "success_once": success_once}
         data.meta = {
             **{
@@ -176,13 +202,13 @@ class MetaWorldRecorder:
                 "embodiment": job.role if job.role == ROLE_DEMONSTRATOR else ROLE_AGENT,
                 "robot_uid": ROBOT_UID,
                 "attempt": job.attempt,
-                "kept": success_once,
-                "head": 0,
+                "kept": kept,
+                "head": 1 if job.role == ROLE_SYNTHESIZED else 0,
                 "max_step_m": STEP_M,
                 "control_freq_hz": self.suite.control_freq_hz,
                 "code_sha256": self.code_sha256,
-                "expert_done": success_once,
                 "success_step": rollout.success_step,
+                **extra_meta,
             },
             **data.meta,
         }

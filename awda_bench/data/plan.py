@@ -182,17 +182,9 @@ class CollectPlan:
 
 def check_metaworld_collection(suite: Suite, config: CollectConfig) -> None:
     """What a Meta-World collection refuses before anything runs: task names the package lacks,
-    ``--workers 0`` or Ray (its episodes play in ``.venv-metaworld`` workers), and trajectory
-    synthesis (not implemented there: :class:`~awda_bench.data.config.SynthesisConfig`'s
-    waypoint box is pick-and-place's world frame, above its bins; Meta-World's scenes need their
-    own box per task, clear of fixtures that stand up to ~30 cm (doors, shelves, the hoop))."""
+    and ``--workers 0`` or Ray (its episodes play in ``.venv-metaworld`` workers)."""
     check_task_names(suite)
     check_local_workers(suite.name, suite.simulator, config.workers, config.backend)
-    if config.synthesize:
-        raise UsageError(
-            f"--synthesize is not implemented on {suite.name!r}: the synthesis waypoint box is "
-            "pick-and-place's world frame, Meta-World's scenes need their own; drop --synthesize"
-        )
 
 
 def make_plan(config: CollectConfig) -> CollectPlan:
@@ -249,7 +241,7 @@ def make_plan(config: CollectConfig) -> CollectPlan:
         "image_size": list(config.frame_size(suite)),
         "depth_size": list(config.depth_size),
         "jpeg_quality": config.jpeg_quality,
-        "synthesis": asdict(config.synthesis),
+        "synthesis": asdict(config.synthesis_config(suite)),
         "horizon_steps": suite.horizon_steps,
         "control_freq_hz": suite.control_freq_hz,
         "awda_bench_version": version,

@@ -285,12 +285,10 @@ class EpisodeRecorder:
         from awda_bench.primitives.config import FreeSpaceConfig
         from awda_bench.primitives.free_space import FreeSpace
 
-        cfg: SynthesisConfig = self.config.synthesis
+        cfg: SynthesisConfig = self.config.synthesis_config(self.suite)
         base = env.unwrapped
         emb = base.embodiment
-        rng = np.random.default_rng(seed)
-        count = int(rng.integers(cfg.min_waypoints, cfg.max_waypoints + 1))
-        waypoints = rng.uniform(cfg.low_m, cfg.high_m, size=(count, 3))
+        waypoints = cfg.draw_waypoints(seed)
         motion_config = FreeSpaceConfig(max_step_m=emb.max_step_m)
         motions = [FreeSpace(w, motion_config, grip=GRIP_OPEN) for w in waypoints]
         current, settle = 0, 0

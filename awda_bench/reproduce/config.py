@@ -9,13 +9,20 @@ from pathlib import Path
 
 from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.primitives.config import CENTRE_SUFFIX
+from awda_bench.suites import Suite
 from awda_bench.training.columns import TRAINABLE, Column
 
 SUITES: tuple[str, ...] = ("pick_place", "mosaic", "metaworld", "metaworld_ml45")
 """Suites ``reproduce`` knows how to lay out."""
 
 DEFAULT_SYNTHESIZE = 200
-"""Synthesized trajectories a collection adds (``--synthesize``) where the suite has synthesis."""
+"""Synthesized trajectories a collection adds (``--synthesize``) where
+:data:`SUITE_SYNTHESIZE` has no entry for the suite."""
+
+SUITE_SYNTHESIZE: dict[str, int] = {"metaworld": 450, "metaworld_ml45": 450}
+"""Suites whose default differs. Meta-World: 10 per training env (45 envs), half the 20 task-driven
+agent episodes per task, as pick-and-place's 200 are about half its 420 (the reference: 100 per
+env beside 100 scripted demos per task, the same 1:1 ratio at five times our data)."""
 
 
 DEFAULT_EPISODES_PER_TASK = 20
@@ -38,14 +45,8 @@ def default_episodes_per_task(suite_name: str) -> int:
 
 
 def default_synthesize(suite_name: str) -> int:
-    """``--synthesize``'s default for ``suite_name``: :data:`DEFAULT_SYNTHESIZE`, or 0 on
-    Meta-World, where trajectory synthesis is not implemented (its waypoint box is
-    pick-and-place's world frame; :func:`awda_bench.data.plan.check_metaworld_collection`)."""
-    from awda_bench.suites import load_suite
-
-    if suite_name not in SUITES:  # plan_stages refuses it in one line
-        return DEFAULT_SYNTHESIZE
-    return 0 if load_suite(suite_name).simulator == "metaworld" else DEFAULT_SYNTHESIZE
+    """``--synthesize``'s default for ``suite_name`` (:data:`SUITE_SYNTHESIZE`)."""
+    return SUITE_SYNTHESIZE.get(suite_name, DEFAULT_SYNTHESIZE)
 
 
 def column_key(column: Column) -> str:
@@ -109,7 +110,42 @@ FIT_CHECK_COLUMN = "full-1"
 FIT_CHECK_LABEL = "full-1 (train tasks)"
 FIT_CHECK_TASKS = 2
 FIT_CHECK_SNAPSHOTS = 3
-"""Full-1's last 3 snapshots on the first 2 training tasks (same episodes per task)."""
+"""Full-1's last 3 snapshots on training tasks (:func:`fit_check_tasks`; same episodes per
+task as the held-out evaluation)."""
+
+
+def _shared_words(a: str, b: str) -> int:
+    """Leading hyphen-separated words two family names share (``door-unlock``, ``door-lock``: 1)."""
+    n = 0
+    for x, y in zip(a.split("-"), b.split("-"), strict=False):
+        if x != y:
+            break
+        n += 1
+    return n
+
+
+def fit_check_tasks(suite: Suite) -> tuple[int, ...]:
+    """The training tasks Full-1's fit check plays: did the recipe fit the tasks most like the
+    held-out ones?
+
+    Where every held-out task is a family of its own that training never shows (Meta-World), each
+    held-out task's *sibling*: the training task whose family name shares the most leading words
+    with it (at least one; the first by index on ties), so ``button-press`` -> ``button-press-
+    topdown``, ``door-unlock`` -> ``door-close``, ``pick-place-wall`` -> ``pick-place``,
+    ``sweep-into`` -> ``sweep``, ``window-open`` -> ``window-close``. A held-out task without one
+    adds nothing. Otherwise (pick-and-place, whose held-out tasks are variations of the training
+    family; or no sibling at all) the first :data:`FIT_CHECK_TASKS` training tasks."""
+    train = suite.train_tasks
+    train_families = {t.family for t in train}
+    held_out = suite.eval_tasks
+    if not held_out or any(t.family in train_families for t in held_out):
+        return tuple(t.index for t in train[:FIT_CHECK_TASKS])
+    siblings: list[int] = []
+    for task in held_out:
+        best = max(train, key=lambda t: (_shared_words(task.family, t.family), -t.index))
+        if _shared_words(task.family, best.family) and best.index not in siblings:
+            siblings.append(best.index)
+    return tuple(siblings) or tuple(t.index for t in train[:FIT_CHECK_TASKS])
 
 
 @dataclass(frozen=True)

@@ -18,11 +18,11 @@ from awda_bench.reproduce.config import (
     FIT_CHECK_COLUMN,
     FIT_CHECK_LABEL,
     FIT_CHECK_SNAPSHOTS,
-    FIT_CHECK_TASKS,
     SUITES,
     ReproduceConfig,
     default_synthesize,
     eval_method,
+    fit_check_tasks,
     train_data,
 )
 from awda_bench.reproduce.costs import COSTS, clock
@@ -346,13 +346,13 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             )
         )  # fmt: skip
         if key == FIT_CHECK_COLUMN and config.fit_check and config.hold_out is None:
-            train_tasks = tuple(t.index for t in suite.train_tasks[:FIT_CHECK_TASKS])
+            train_tasks = fit_check_tasks(suite)
             fit = replace(
                 evaluate, out=out / "runs-train-tasks", snapshots=FIT_CHECK_SNAPSHOTS,
                 tasks=train_tasks, label=FIT_CHECK_LABEL, split="train",
             )  # fmt: skip
             remaining = _eval_remaining(fit) if trained else None
-            n_fit = FIT_CHECK_SNAPSHOTS * episodes * FIT_CHECK_TASKS
+            n_fit = FIT_CHECK_SNAPSHOTS * episodes * len(train_tasks)
             stages.append(
                 Stage(
                     f"evaluate {key} on training tasks",
