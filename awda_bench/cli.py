@@ -14,6 +14,7 @@ from collections.abc import Sequence
 
 from awda_bench.commands import COMMANDS
 from awda_bench.errors import AwdaError
+from awda_bench.harness.parent_death import die_with_parent_from_env
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -30,6 +31,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    die_with_parent_from_env()  # a reproduce stage stops when reproduce dies
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

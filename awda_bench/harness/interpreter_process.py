@@ -17,6 +17,7 @@ pipe), and sends ``(build, config)`` first::
 from __future__ import annotations
 
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -95,8 +96,10 @@ def start_in_interpreter(
 
 def main(argv: list[str]) -> None:
     """The child: take the connection on file descriptor ``argv[0]``, then serve jobs."""
+    from awda_bench.harness.parent_death import die_with_parent
     from awda_bench.harness.worker_loop import serve_jobs
 
+    die_with_parent(signal.SIGKILL)  # before the executor's (slow) imports
     conn = Connection(int(argv[0]))
     try:
         _kind, build, config = conn.recv()  # imports the executor's module: may fail here

@@ -161,7 +161,9 @@ class ProcessPool(JobPool[J, R]):
                         slots[i] = self._respawn(slot)
         finally:
             for slot in slots:
-                if slot.process.is_alive():
+                if slot.job is not None:  # leaving on an error or a signal mid-job: the result
+                    slot.kill()  # has nowhere to go (the job is re-played on resume)
+                elif slot.process.is_alive():
                     try:
                         slot.conn.send(None)
                     except OSError:

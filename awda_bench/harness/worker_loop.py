@@ -12,17 +12,21 @@ time until told to stop. Runs in a process spawned from this interpreter
 from __future__ import annotations
 
 import os
+import signal
 import traceback
 from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
 from awda_bench.harness.job_pool import Executor
+from awda_bench.harness.parent_death import die_with_parent
 
 
 def serve_jobs(conn: Connection, build: Callable[[Any], Executor], config: Any) -> None:
     """Build ``build(config)`` and play the jobs received on ``conn`` until ``None`` (or the
-    parent's end closes)."""
+    parent's end closes). The worker is SIGKILLed by the kernel when its parent dies
+    (:func:`~awda_bench.harness.parent_death.die_with_parent`), mid-job included."""
+    die_with_parent(signal.SIGKILL)
     try:
         executor = build(config)
     except BaseException as exc:

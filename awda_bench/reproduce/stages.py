@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from awda_bench.errors import AwdaError, CorruptFileError, UsageError
+from awda_bench.harness.parent_death import PARENT_ENV
 from awda_bench.reproduce.config import ReproduceConfig
 from awda_bench.reproduce.costs import clock
 from awda_bench.reproduce.plan import Stage
@@ -164,7 +165,10 @@ def run_stages(
             # its own process group (stop signals reach its workers; Ctrl-C reaches this process
             # alone) in this session: a new session would be a new scheduler autogroup on Linux,
             # at nice 0 whatever ``nice`` this run was started under
-            child = subprocess.Popen(argv, process_group=0)
+            # the stage is SIGTERMed if reproduce dies (SIGKILL too): no orphaned stage or workers
+            child = subprocess.Popen(
+                argv, process_group=0, env={**os.environ, PARENT_ENV: str(os.getpid())}
+            )
             with _forward_stop_signals(child, received):
                 while True:
                     try:
