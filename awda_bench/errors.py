@@ -56,3 +56,11 @@ class RemotePolicyError(AwdaError):
     """A served policy (``run --method remote``) could not be reached, timed out, dropped the
     connection, raised, or answered with something that is not an action; inside an episode it
     is recorded as that episode's error (a re-run retries it)."""
+
+
+class StorageError(AwdaError):
+    """Something the run must write could not be written (no space left, a read-only or
+    unwritable directory, an I/O error): the message names the path and the cause; what was
+    written before stays readable, and the same command resumes once the cause is fixed."""
+
+    exit_code = 4

@@ -14,6 +14,13 @@ status ``error`` is re-run and replaced (``attempts`` counts the tries); a missi
 Each record is committed as it arrives, so a killed run loses at most the episodes in flight.
 Every check (schema, protocol) happens before the first write, so a refused run leaves the file
 untouched.
+
+A new store is created whole or not at all: the schema is written into ``results.sqlite.new``
+(one transaction), then renamed into place; a store that could not be finished (no space left,
+an I/O error) is removed, so the same command starts afresh once the cause is fixed (a half-made
+file used to be refused for good: "store schema None"). Any write the store cannot make is a
+:class:`~awda_bench.errors.StorageError` naming the file and the cause, never a traceback; the
+episodes committed before it stay.
 """
 
 from __future__ import annotations
@@ -27,7 +34,7 @@ from typing import Any
 
 import pandas as pd
 
-from awda_bench.errors import CorruptFileError, ProtocolMismatchError, UsageError
+from awda_bench.errors import CorruptFileError, ProtocolMismatchError, StorageError, UsageError
 from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
 from awda_bench.harness.episode_specs import EvalProtocol
 from awda_bench.harness.methods import SnapshotRef
@@ -134,19 +141,53 @@ class ResultsStore:
 
     def __init__(self, run_dir: Path, *, create: bool) -> None:
         self.path = Path(run_dir) / STORE_NAME
+        if create and self.path.is_file() and self.path.stat().st_size == 0:
+            self.path.unlink()  # an empty file holds nothing: made whole below
         if not self.path.is_file():
             if not create:
                 raise UsageError(
                     f"no results store at {self.path}; "
                     "run `python -m awda_bench run` first or pass --runs"
                 )
-            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self._create_whole()
         self._conn = sqlite3.connect(self.path, timeout=30)
         try:
             self._check_or_init(create)
+        except sqlite3.OperationalError as exc:
+            self._conn.close()
+            raise self._storage_error(exc) from exc
         except BaseException:
             self._conn.close()
             raise
+
+    def _storage_error(self, exc: BaseException) -> StorageError:
+        cause = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        return StorageError(
+            f"cannot write the results store {self.path}: {cause}; free space or fix the "
+            "directory's permissions, then re-run the same command (recorded episodes are kept)"
+        )
+
+    def _create_whole(self) -> None:
+        """Write an empty store with its schema next to :attr:`path`, then rename it into place
+        (module docstring); on failure nothing is left behind."""
+        partial = self.path.with_name(STORE_NAME + ".new")
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            partial.unlink(missing_ok=True)
+            conn = sqlite3.connect(partial)
+            try:
+                conn.executescript(f"BEGIN;\n{_SCHEMA}\nCOMMIT;")
+                with conn:
+                    conn.execute("INSERT INTO meta VALUES ('schema_version', ?)", (SCHEMA_VERSION,))
+            finally:
+                conn.close()
+            partial.replace(self.path)
+        except (OSError, sqlite3.OperationalError) as exc:
+            try:
+                partial.unlink(missing_ok=True)
+            except OSError:
+                pass  # the directory itself is unwritable: there is no partial file either
+            raise self._storage_error(exc) from exc
 
     def _check_or_init(self, create: bool) -> None:
         try:
@@ -177,13 +218,10 @@ class ResultsStore:
                 # power loss can drop the last commits); no fsync per episode
                 self._conn.execute("PRAGMA synchronous=NORMAL")
             return
-        if not create:
-            raise CorruptFileError(f"{self.path} is empty; run `python -m awda_bench run` first")
-        self._conn.execute("PRAGMA journal_mode=WAL")
-        self._conn.execute("PRAGMA synchronous=NORMAL")
-        with self._conn:
-            self._conn.executescript(_SCHEMA)
-            self._conn.execute("INSERT INTO meta VALUES ('schema_version', ?)", (SCHEMA_VERSION,))
+        raise CorruptFileError(
+            f"{self.path} is empty (not an awda_bench results store); move it away or re-run "
+            "`python -m awda_bench run` into another directory"
+        )
 
     def _add_missing_columns(self) -> None:
         """A store written before a column existed gains it (NULL: unknown): ``privileged``
@@ -314,6 +352,12 @@ class ResultsStore:
         placeholders = ", ".join("?" * len(EPISODE_COLUMNS))
         columns = ", ".join(EPISODE_COLUMNS)
         updates = ", ".join(f"{c}=excluded.{c}" for c in EPISODE_COLUMNS[3:])
+        try:
+            self._insert(columns, placeholders, updates, (*values, time.time()))
+        except sqlite3.OperationalError as exc:
+            raise self._storage_error(exc) from exc
+
+    def _insert(self, columns: str, placeholders: str, updates: str, values: tuple) -> None:
         with self._conn:
             self._conn.execute(
                 f"INSERT INTO episodes ({columns}, attempts, finished_at) "
@@ -321,7 +365,7 @@ class ResultsStore:
                 "ON CONFLICT (protocol, method, snapshot, task, episode) DO UPDATE SET "
                 f"{updates}, attempts=episodes.attempts+1, finished_at=excluded.finished_at "
                 "WHERE episodes.status != 'ok'",
-                (*values, time.time()),
+                values,
             )
 
     # --- reading -------------------------------------------------------------------------------

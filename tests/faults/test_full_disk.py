@@ -1,0 +1,104 @@
+"""A full disk (issue 53): ``run`` at store creation and mid-run, then the same command after the
+space is back.
+
+The disk is "full" for the run's process through ``RLIMIT_FSIZE`` (no file may grow past the limit;
+SIGXFSZ ignored, so a write past it fails with EFBIG, which SQLite reports as "database or disk is
+full", as it does ENOSPC): it needs no mount and no root, so CI runs it. Promised: one line naming
+the file and the cause, exit code 4, the episodes committed before kept, no half-made store, and
+the same command afterwards finishes with every episode exactly once.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import signal
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from harness_fakes import write_fake_suite
+
+from awda_bench.harness.results_store import STORE_NAME
+
+TESTS = Path(__file__).resolve().parent.parent
+EPISODES = 6
+"""Per evaluated task of the fake suite."""
+EVAL_TASKS = 2
+"""The fake suite's held-out tasks: 12 episodes in all."""
+
+
+def _command(suites: Path, out: Path) -> list[str]:
+    return [sys.executable, "-m", "awda_bench", "run", "--suite", "fake", "--tasks-dir",
+            str(suites), "--method", "harness_fakes:SkillPolicy", "--episodes", str(EPISODES),
+            "--workers", "0", "--no-progress", "--out", str(out)]  # fmt: skip
+
+
+def _run(command: list[str], file_limit_bytes: int | None) -> subprocess.CompletedProcess:
+    def full_disk() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (file_limit_bytes, file_limit_bytes))
+
+    env = {**os.environ, "PYTHONPATH": str(TESTS), "OMP_NUM_THREADS": "1"}
+    return subprocess.run(
+        command, env=env, capture_output=True, text=True, timeout=300,
+        preexec_fn=None if file_limit_bytes is None else full_disk,
+    )  # fmt: skip
+
+
+def _rows(out: Path) -> list[tuple]:
+    db = sqlite3.connect(out / STORE_NAME)
+    try:
+        return db.execute(
+            "SELECT task, episode, status, attempts FROM episodes ORDER BY task, episode"
+        ).fetchall()
+    finally:
+        db.close()
+
+
+@pytest.fixture
+def suites(tmp_path: Path) -> Path:
+    d = tmp_path / "tasks"
+    d.mkdir()
+    write_fake_suite(d)
+    return d
+
+
+def test_a_full_disk_at_store_creation_leaves_no_store_that_later_runs_refuse(
+    tmp_path: Path, suites: Path
+) -> None:
+    out = tmp_path / "run"
+    command = _command(suites, out)
+    full = _run(command, file_limit_bytes=8 * 1024)  # the schema alone needs more
+    err = full.stderr.strip()
+    assert full.returncode == 4, err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert str(out / STORE_NAME) in err and "full" in err
+    assert not (out / STORE_NAME).exists()  # nothing half-made
+    assert not (out / f"{STORE_NAME}.new").exists()
+    again = _run(command, file_limit_bytes=None)  # the space is back
+    assert again.returncode == 0, again.stderr
+    rows = _rows(out)
+    assert len(rows) == EVAL_TASKS * EPISODES and all(r[2] == "ok" and r[3] == 1 for r in rows)
+
+
+def test_a_disk_that_fills_mid_run_keeps_what_was_recorded_and_resumes_the_rest(
+    tmp_path: Path, suites: Path
+) -> None:
+    out = tmp_path / "run"
+    command = _command(suites, out)
+    # the store's file and its WAL grow with every episode: room for some of the 12
+    full = _run(command, file_limit_bytes=72 * 1024)
+    err = full.stderr.strip()
+    assert full.returncode == 4, err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err and STORE_NAME in err
+    kept = _rows(out)  # readable, and what was committed is there
+    assert 0 < len(kept) < EVAL_TASKS * EPISODES
+    again = _run(command, file_limit_bytes=None)
+    assert again.returncode == 0, again.stderr
+    rows = _rows(out)
+    assert len(rows) == EVAL_TASKS * EPISODES and all(r[2] == "ok" for r in rows)
+    assert all(r[3] == 1 for r in rows)  # every episode recorded exactly once
+    assert set(kept) <= set(rows)
