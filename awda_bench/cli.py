@@ -2,18 +2,20 @@
 
 Each sub-command lives in :mod:`awda_bench.commands.<name>`. Errors deriving from
 :class:`awda_bench.errors.AwdaError` are printed as one line (``error: ...``) with the error's exit
-code; anything else is a bug and keeps its traceback.
+code; so are the machine's I/O errors (:data:`STORAGE_ERRNOS`: a full disk, a read-only
+directory); anything else is a bug and keeps its traceback.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import sys
 from collections.abc import Sequence
 
 from awda_bench.commands import COMMANDS
-from awda_bench.errors import AwdaError
+from awda_bench.errors import AwdaError, StorageError
 from awda_bench.harness.parent_death import die_with_parent_from_env
 
 
@@ -30,6 +32,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+STORAGE_ERRNOS = frozenset(
+    {errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EROFS, errno.EACCES, errno.EPERM, errno.EIO}
+)
+"""An ``OSError`` with one of these is the machine's (a full disk, a read-only or unwritable
+directory, a failing device), not the program's: the CLI prints it as one line naming the file,
+exit code 4 (:class:`~awda_bench.errors.StorageError`), instead of a traceback."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     die_with_parent_from_env()  # a reproduce stage stops when reproduce dies
     parser = build_parser()
@@ -39,6 +49,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     except AwdaError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return exc.exit_code
+    except OSError as exc:
+        if exc.errno not in STORAGE_ERRNOS:
+            raise
+        where = f" {exc.filename}" if exc.filename else ""
+        print(
+            f"error: I/O error on{where}: {exc.strerror}; free space or fix the directory's "
+            "permissions, then re-run the same command (what was written before is kept)",
+            file=sys.stderr,
+        )
+        return StorageError.exit_code
     except KeyboardInterrupt:
         print("interrupted; results written so far are kept", file=sys.stderr)
         return 130

@@ -163,7 +163,7 @@ class ResultsStore:
     def _storage_error(self, exc: BaseException) -> StorageError:
         cause = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         return StorageError(
-            f"cannot write the results store {self.path}: {cause}; free space or fix the "
+            f"cannot use the results store {self.path}: {cause}; free space or fix the "
             "directory's permissions, then re-run the same command (recorded episodes are kept)"
         )
 
@@ -195,6 +195,8 @@ class ResultsStore:
                 r[0]
                 for r in self._conn.execute("SELECT name FROM sqlite_master WHERE type='table'")
             }
+        except sqlite3.OperationalError:
+            raise  # the disk's (I/O, full, locked): a StorageError in __init__, the file is fine
         except sqlite3.DatabaseError as exc:
             raise CorruptFileError(
                 f"{self.path} is not a results store ({exc}); move it away"

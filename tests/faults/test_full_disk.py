@@ -102,3 +102,54 @@ def test_a_disk_that_fills_mid_run_keeps_what_was_recorded_and_resumes_the_rest(
     assert len(rows) == EVAL_TASKS * EPISODES and all(r[2] == "ok" for r in rows)
     assert all(r[3] == 1 for r in rows)  # every episode recorded exactly once
     assert set(kept) <= set(rows)
+
+
+def test_a_report_on_a_full_disk_is_one_line_and_the_store_is_untouched(
+    tmp_path: Path, suites: Path
+) -> None:
+    out = tmp_path / "run"
+    assert _run(_command(suites, out), file_limit_bytes=None).returncode == 0
+    before = (out / STORE_NAME).read_bytes()
+    report = [sys.executable, "-m", "awda_bench", "report", "--runs", str(out), "--out",
+              str(tmp_path / "reports")]  # fmt: skip
+    # not even SQLite's shared-memory index of the store's log fits: reading it fails
+    full = _run(report, file_limit_bytes=512)
+    err = full.stderr.strip()
+    assert full.returncode == 4, err
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert str(out / STORE_NAME) in err and "move it away" not in err  # the store is fine
+    assert (out / STORE_NAME).read_bytes() == before
+    assert _run(report, file_limit_bytes=None).returncode == 0
+
+
+def _read_only_directory(directory: Path) -> bool:
+    """Make ``directory`` unwritable to this process: chmod where that binds (not root), else
+    a read-only tmpfs mounted on it (root); False where neither works."""
+    directory.mkdir()
+    directory.chmod(0o555)
+    try:
+        (directory / "probe").write_text("x")
+    except PermissionError:
+        return True
+    (directory / "probe").unlink()
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(directory)],
+                             capture_output=True)  # fmt: skip
+    return mounted.returncode == 0
+
+
+def test_a_read_only_output_directory_is_one_line_and_writes_nothing(
+    tmp_path: Path, suites: Path
+) -> None:
+    parent = tmp_path / "ro"
+    if not _read_only_directory(parent):
+        pytest.skip("cannot make a read-only directory here (root without mount rights)")
+    try:
+        out = parent / "run"
+        full = _run(_command(suites, out), file_limit_bytes=None)
+        err = full.stderr.strip()
+        assert full.returncode == 4, err
+        assert len(err.splitlines()) == 1 and "Traceback" not in err and str(out) in err
+        assert not out.exists()
+    finally:
+        subprocess.run(["umount", str(parent)], capture_output=True)
+        parent.chmod(0o755)
