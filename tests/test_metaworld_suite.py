@@ -292,6 +292,17 @@ def test_scripted_and_random_through_the_harness(tmp_path: Path) -> None:
     rows = _records(tmp_path / "s")
     assert all(row[4] < suite.horizon_steps for row in rows.values())  # stops at its success
     assert all(row[4] == suite.horizon_steps for row in _records(tmp_path / "r").values())
+    # the grasp analysis on Meta-World's object (the puck): the primitives reach it before they
+    # close, close on it and lift it (the scripted experts start closing 5-8 cm away, or at once:
+    # the analysis reads the grasp primitive's way); random actions never lift it
+    gt = _sweep(tmp_path / "g", "gt-waypoints-centre", 1, (task,), 2)
+    assert gt.errors == 0 and gt.successes == 2
+    with ResultsStore(tmp_path / "g", create=False) as store:
+        grasps = store.raw("SELECT reached, grasped, first_grip FROM episodes")
+    assert grasps == [(1, 1, "target")] * 2
+    with ResultsStore(tmp_path / "r", create=False) as store:
+        grasps = store.raw("SELECT grasped, first_grip FROM episodes")
+    assert all(g == 0 and f in ("target", "nothing", "never") for g, f in grasps)
     with ResultsStore(tmp_path / "s", create=False) as store:
         versions = json.loads(store.raw("SELECT versions FROM runs")[0][0])
     assert versions[".venv-metaworld mujoco"] == "3.3.0"  # the MuJoCo that played, not .venv's

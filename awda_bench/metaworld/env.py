@@ -9,6 +9,13 @@
                                          hand (mocap) moves a[:3] x 1 cm, a[3] > 0 closes
     info["success"]                      Meta-World's per-step flag (not sticky: the harness's
                                          success_once is "any step")
+    info["reached"], info["grasped"]     the grasp analysis (SPEC §7), latched, on the task's
+                                         object (Meta-World's obs[4:7]): reached = the TCP within
+                                         REACH_THRESHOLD_M of it before the first grip command;
+                                         grasped = reached, then the object raised
+                                         LIFT_THRESHOLD_M above its start
+    grip_outcome(a)                      what a closes the gripper on: the object (within
+                                         REACH_THRESHOLD_M of the TCP: "target") or nothing
     episode_observations(spec, extras)   what an observation-only policy sees
 
 The obs ``reset`` and ``step`` return is Meta-World's 39-number state (with the goal): it reaches
@@ -27,6 +34,14 @@ from awda_bench.metaworld.layout import make_task_env, reset_to_layout
 from awda_bench.metaworld.observations import MetaWorldObservations
 from awda_bench.metaworld.renderer import FrameRenderer, process_renderer
 from awda_bench.suites import Suite
+
+REACH_THRESHOLD_M = 0.04
+"""*Reached*: the TCP within this of the task's object [m] (SPEC §7; the ManiSkill tasks'
+``reach_threshold_m``)."""
+LIFT_THRESHOLD_M = 0.05
+"""*Grasped*: reached, then the object raised this far above its start height [m] (the ManiSkill
+tasks' ``lift_threshold_m``). Objects fixed to a fixture (buttons, handles, the lock) never rise:
+grasped stays False on those tasks."""
 
 MAX_PATH_LENGTH = 500
 """Steps after which a Meta-World env refuses to step without a reset (its ``max_path_length``)."""
@@ -56,6 +71,11 @@ class MetaWorldEnv:
         """The current episode's layout seed."""
         self.last_success = False
         """``info["success"]`` of the last step (False after a reset)."""
+        self.reached = False
+        """The grasp analysis's latched flags of this episode (module docstring)."""
+        self.grasped = False
+        self.grip_attempted = False
+        self._object_start_z = 0.0
 
     @property
     def unwrapped(self) -> MetaWorldEnv:
@@ -81,13 +101,46 @@ class MetaWorldEnv:
         self.task_name = name
         self.seed = int(seed)
         self.last_success = False
-        return reset_to_layout(self._task_envs[name], seed), {}
+        obs = reset_to_layout(self._task_envs[name], seed)
+        self.grip_attempted = self.grasped = False
+        self._object_start_z = float(self._object_pos()[2])
+        self.reached = self._object_distance() <= REACH_THRESHOLD_M
+        return obs, {"reached": self.reached, "grasped": False}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         a = np.clip(np.asarray(action, dtype=np.float32).reshape(-1)[:4], -1.0, 1.0)
+        self.grip_attempted |= bool(a[3] > 0)  # the grip is latched on the commanded action
         obs, reward, terminated, truncated, info = self.task_env.step(a)
         self.last_success = bool(info.get("success", 0.0))
+        if not self.grip_attempted:
+            self.reached |= self._object_distance() <= REACH_THRESHOLD_M
+        lifted = self._object_pos()[2] - self._object_start_z >= LIFT_THRESHOLD_M
+        self.grasped |= self.reached and bool(lifted)
+        info = {**info, "reached": self.reached, "grasped": self.grasped}
         return np.asarray(obs, dtype=np.float64), float(reward), terminated, truncated, info
+
+    def _object_pos(self) -> np.ndarray:
+        """The task's object [m] (Meta-World's ``obs[4:7]``: the puck, the cube, the button, the
+        window's handle, the lock, ...)."""
+        return np.asarray(self.task_env._get_pos_objects(), dtype=np.float64).reshape(-1)[:3]
+
+    def _object_distance(self) -> float:
+        from awda_bench.metaworld.sawyer import robot_state
+
+        return float(np.linalg.norm(robot_state(self.task_env).tcp_pos - self._object_pos()))
+
+    def object_distances(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(1, 1)`` TCP-to-object distance [m] and ``(1,)`` the target's index (0): one object
+        per task, so a first grip is on the target or on nothing."""
+        return np.array([[self._object_distance()]]), np.zeros(1, dtype=np.int64)
+
+    def grip_outcome(self, action: Any) -> np.ndarray:
+        """``(1,)``: -1 where ``action`` does not close the gripper, else 0 (the object within
+        :data:`REACH_THRESHOLD_M` of the TCP: ``target``) or 2 (``nothing``), indices into
+        :data:`~awda_bench.episode.GRIP_OUTCOMES`."""
+        if not float(np.asarray(action, dtype=np.float64).reshape(-1)[3]) > 0:
+            return np.array([-1])
+        return np.array([0 if self._object_distance() <= REACH_THRESHOLD_M else 2])
 
     def episode_observations(
         self, spec: EpisodeSpec, extras: dict[str, Any]
