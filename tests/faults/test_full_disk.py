@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import os
 import resource
+import shutil
 import signal
 import sqlite3
 import subprocess
@@ -132,6 +133,8 @@ def _read_only_directory(directory: Path) -> bool:
     except PermissionError:
         return True
     (directory / "probe").unlink()
+    if shutil.which("mount") is None:
+        return False
     mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(directory)],
                              capture_output=True)  # fmt: skip
     return mounted.returncode == 0
@@ -151,5 +154,6 @@ def test_a_read_only_output_directory_is_one_line_and_writes_nothing(
         assert len(err.splitlines()) == 1 and "Traceback" not in err and str(out) in err
         assert not out.exists()
     finally:
-        subprocess.run(["umount", str(parent)], capture_output=True)
+        if shutil.which("umount"):
+            subprocess.run(["umount", str(parent)], capture_output=True)
         parent.chmod(0o755)
