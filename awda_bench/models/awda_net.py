@@ -76,6 +76,7 @@ class AwdaNet(nn.Module):
                 waypoint_dim=config.waypoint_dim,
                 num_heads=config.num_heads,
                 cameras=self.ray_cameras,
+                height_offset_m=config.ray_height_offset_m,
             )
             self.grid = shape.grid
             if trunk.head == "demo-pointer":

@@ -9,8 +9,9 @@ cells, per waypoint head::
     v_j(cell) = MLP_j([x(cell), cell x, y])  read as an attributed point (3 + k):
         with cameras:   the point at height z_j + dz(cell) on the ray through the cell's centre
                         of the camera the sample was filmed with (its index, ``camera``), moved
-                        by (dx, dy); |dz|, |dx|, |dy| <= 5 cm; z_j a parameter per waypoint, the
-                        MLP gives dz, dx, dy and attributes
+                        by (dx, dy); |dx|, |dy| <= 5 cm, |dz| <= height_offset_m (5 cm unless
+                        the config says otherwise); z_j a parameter per waypoint, the MLP gives
+                        dz, dx, dy and attributes
         without:        the MLP gives xyz and attributes
     waypoint_j = sum over cells of p_j(cell) v_j(cell)
 
@@ -83,6 +84,8 @@ class CellHeadShape:
     cameras: tuple[Camera, ...] = ()
     """The agent cameras, for ray votes (a sample names its own by index); empty: free xyz
     votes."""
+    height_offset_m: float = MAX_OFFSET_M
+    """How far a ray vote's height may be from its waypoint's height parameter [m]."""
 
 
 class CellReadout(nn.Module):
@@ -101,6 +104,7 @@ class CellReadout(nn.Module):
         )
         self.register_buffer("cell_xy", torch.stack((xs, ys), dim=-1).reshape(h * w, 2))
         self.rays = bool(cameras)
+        self.height_offset_m = shape.height_offset_m
         if cameras:
             rays = [cell_rays(k.double(), e.double(), size, grid) for k, e, size in cameras]
             self.register_buffer("ray_origin", torch.stack([o for o, _ in rays]).float())
@@ -132,10 +136,11 @@ class CellReadout(nn.Module):
     def _ray_points(self, votes: torch.Tensor, head: int, camera: torch.Tensor) -> torch.Tensor:
         """Raw votes ``(b, L, N, 3 + k)`` read as (z, dx, dy, attributes) on the rays of each
         sample's ``camera`` ``(b,)`` -> attributed points: a waypoint's height is its own
-        parameter plus at most ``MAX_OFFSET_M`` from the cell, so that votes start ordered along
-        the image (a free height per cell would scatter them)."""
+        parameter plus at most ``height_offset_m`` (``MAX_OFFSET_M`` unless the config says
+        otherwise) from the cell, so that votes start ordered along the image (a free height per
+        cell would scatter them)."""
         height = self.height[head].view(-1, 1)  # (N, 1)
-        z = height + MAX_OFFSET_M * torch.tanh(votes[..., :1])
+        z = height + self.height_offset_m * torch.tanh(votes[..., :1])
         offset, attributes = votes[..., 1:3], votes[..., 3:]
         direction = self.ray_direction[camera][:, :, None, :]  # (b, L, 1, 3)
         origin = self.ray_origin[camera][:, None, None, :]  # (b, 1, 1, 3)

@@ -180,6 +180,12 @@ class AwdaConfig:
     (:mod:`awda_bench.models.identification_loss`); 0 trains on the Soft-DTW loss alone, as the
     reference. Needs the ``demo-pointer`` head and a camera (the labels are trajectory points
     projected onto the cells)."""
+    ray_height_offset_m: float = 0.05
+    """Cell heads voting on camera rays: how far [m] a cell's vote may set its height from its
+    waypoint's own height parameter (``cell_readout``). 0.05 on pick-and-place and MOSAIC, whose
+    waypoints share their heights across tasks; Meta-World's 45 tasks do not (a button's face at
+    ~12 cm, a window's handle at ~20, a goal up to 30 cm in the air), and a waypoint whose height
+    is wrong slides along its ray: ``recipes/small.toml`` [suite.metaworld.model]."""
     camera_intrinsic: tuple[float, ...] = ()
     """The agent cameras' 3x3 ``intrinsic_cv``, row-major, one after the other (9 numbers per
     camera), or empty. With cameras the cell heads (``demo-to-scene``, ``demo-pointer``) vote
@@ -242,6 +248,13 @@ class AwdaConfig:
             "identification_weight",
             self.identification_weight,
             "a float >= 0",
+        )
+        _check(
+            0.0 < self.ray_height_offset_m <= 1.0,
+            o,
+            "ray_height_offset_m",
+            self.ray_height_offset_m,
+            "a float in (0, 1]",
         )
 
     @property

@@ -102,6 +102,9 @@ class ModelRecipe:
     identification_weight: float = 0.0
     """``demo-pointer`` only: weight of the identification loss beside the Soft-DTW loss
     (:mod:`awda_bench.models.identification_loss`; 0: Soft-DTW alone, as the reference)."""
+    ray_height_offset_m: float = 0.05
+    """Cell heads on camera rays: how far a cell's vote may set its height from its waypoint's
+    (``AwdaConfig.ray_height_offset_m``)."""
     points_per_segment: int = 12
     """Interpolated points per polyline segment (AWDA loss)."""
     gamma: float = 1e-3

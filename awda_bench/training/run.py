@@ -298,6 +298,7 @@ def model_config(
             head_hidden_dim=m.head_hidden_dim,
             demo_reference_frame=m.demo_reference_frame,
             identification_weight=m.identification_weight,
+            ray_height_offset_m=m.ray_height_offset_m,
             num_heads=column.num_heads,
             points_per_segment=m.points_per_segment,
             gamma=m.gamma,
