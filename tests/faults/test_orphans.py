@@ -28,7 +28,10 @@ MAX_OUTLIVE_S = 5.0
 
 DRIVER = textwrap.dedent(
     """
-    import os, sys
+    import os, signal, sys
+    # Ctrl-C's default (a shell's background job inherits SIGINT ignored, and Python then keeps
+    # ignoring it)
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     sys.path.insert(0, {here!r})
     os.environ["PYTHONPATH"] = os.pathsep.join([{here!r}, os.environ.get("PYTHONPATH", "")])
     from awda_bench.harness.process_pool import ProcessPool
