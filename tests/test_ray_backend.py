@@ -39,14 +39,6 @@ FAKES = "harness_fakes"
 BUILTIN = SnapshotRef(sha256=BUILTIN_SNAPSHOT, name=BUILTIN_SNAPSHOT, path=None, order=0)
 
 
-@pytest.fixture
-def suites(tmp_path: Path) -> Path:
-    d = tmp_path / "tasks"
-    d.mkdir()
-    write_fake_suite(d)
-    return d
-
-
 @pytest.fixture(autouse=True)
 def no_ray_left_running():
     yield

@@ -8,7 +8,7 @@ import time
 from pathlib import Path
 
 import pytest
-from harness_fakes import write_fake_suite, write_snapshots
+from harness_fakes import write_snapshots
 
 from awda_bench.cli import main
 from awda_bench.harness.methods import MethodSpec, register_method, unregister_method
@@ -16,14 +16,6 @@ from awda_bench.harness.results_store import STORE_NAME
 
 TESTS = Path(__file__).resolve().parent
 FAKES = "harness_fakes"
-
-
-@pytest.fixture
-def suites(tmp_path: Path) -> Path:
-    d = tmp_path / "tasks"
-    d.mkdir()
-    write_fake_suite(d)
-    return d
 
 
 @pytest.fixture

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from harness_fakes import SkillPolicy, write_fake_suite, write_snapshots
+from harness_fakes import SkillPolicy, write_snapshots
 
 from awda_bench.cli import main
 from awda_bench.commands.serve import build_server
@@ -52,14 +52,6 @@ def learned_method():
     register_method(LEARNED)
     yield
     unregister_method(LEARNED.name)
-
-
-@pytest.fixture
-def suites(tmp_path: Path) -> Path:
-    directory = tmp_path / "tasks"
-    directory.mkdir()
-    write_fake_suite(directory)
-    return directory
 
 
 @contextmanager

@@ -35,14 +35,6 @@ def fake_methods():
         unregister_method(name)
 
 
-@pytest.fixture
-def suites(tmp_path: Path) -> Path:
-    d = tmp_path / "tasks"
-    d.mkdir()
-    write_fake_suite(d)
-    return d
-
-
 def _config(suites: Path, out: Path, **kw) -> SweepConfig:
     kw.setdefault("method", "fake")
     kw.setdefault("workers", 0)

@@ -281,37 +281,27 @@ class EpisodeRecorder:
         return success, {"expert_done": bool(expert.done)}
 
     def _play_synthesis(self, env: Any, rec: _Stepper, seed: int) -> tuple[bool, dict[str, Any]]:
-        from awda_bench.primitives.base import GRIP_OPEN, RobotState, hold_action
+        from awda_bench.primitives.base import RobotState
         from awda_bench.primitives.config import FreeSpaceConfig
-        from awda_bench.primitives.free_space import FreeSpace
+        from awda_bench.primitives.waypoint_tour import WaypointTour
 
         cfg: SynthesisConfig = self.config.synthesis_config(self.suite)
         base = env.unwrapped
         emb = base.embodiment
         waypoints = cfg.draw_waypoints(seed)
-        motion_config = FreeSpaceConfig(max_step_m=emb.max_step_m)
-        motions = [FreeSpace(w, motion_config, grip=GRIP_OPEN) for w in waypoints]
-        current, settle = 0, 0
+        tour = WaypointTour(waypoints, FreeSpaceConfig(max_step_m=emb.max_step_m), cfg.settle_steps)
         for _ in range(self.suite.horizon_steps):
             state = RobotState(
                 tcp_pos=base.agent.tcp_pose.p[0].cpu().numpy().astype(np.float64),
                 gripper_opening_m=float(base.gripper_opening_m()[0]),
             )
-            action = None
-            while current < len(motions):
-                action = motions[current].step(state)
-                if action is not None:
-                    break
-                current += 1
+            action = tour.step(state)
             if action is None:
-                if settle >= cfg.settle_steps:
-                    break
-                settle += 1
-                action = hold_action(GRIP_OPEN)
+                break
             rec.capture_state(truth=True)
             env_action = emb.to_env_action(np.asarray(action, dtype=np.float32).reshape(1, 4))
             rec.step(env_action)
-        reached = [bool(m.reached) for m in motions]
+        reached = tour.reached
         return all(reached), {
             "waypoints": waypoints.tolist(),
             "waypoints_reached": reached,

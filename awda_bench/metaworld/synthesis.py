@@ -37,8 +37,7 @@ from awda_bench.metaworld.sawyer import (
     robot_state,
     tracking_command,
 )
-from awda_bench.primitives.base import GRIP_OPEN, hold_action
-from awda_bench.primitives.free_space import FreeSpace
+from awda_bench.primitives.waypoint_tour import WaypointTour
 from awda_bench.trajectory import Trajectory
 
 
@@ -65,23 +64,13 @@ def synthesized_rollout(
     """Drive ``task_env``'s hand (at rest, just reset) open through ``waypoints`` (module
     docstring); stops after ``max_steps`` actions at most. The env is left in its last state."""
     offset = mocap_offset(task_env)
-    motion_config = SAWYER_EXECUTOR.motion
-    motions = [FreeSpace(w, motion_config, grip=GRIP_OPEN) for w in waypoints]
+    tour = WaypointTour(waypoints, SAWYER_EXECUTOR.motion, settle_steps)
     tcp, opening, actions, env_actions, success = [], [], [], [], []
-    current, settle = 0, 0
     for t in range(max_steps):
         state = robot_state(task_env)
-        command = None
-        while current < len(motions):
-            command = motions[current].step(state)
-            if command is not None:
-                break
-            current += 1
+        command = tour.step(state)
         if command is None:
-            if settle >= settle_steps:
-                break
-            settle += 1
-            command = hold_action(GRIP_OPEN)
+            break
         if before_step is not None:
             before_step(t)
         action = mocap_action(task_env, command, offset)
@@ -108,4 +97,4 @@ def synthesized_rollout(
         success=flags,
         success_step=first,
     )
-    return SynthesizedRollout(rollout, np.asarray(waypoints), [bool(m.reached) for m in motions])
+    return SynthesizedRollout(rollout, np.asarray(waypoints), tour.reached)

@@ -62,3 +62,22 @@ def outlived_s(pids: set[int], timeout_s: float = 20.0) -> float:
 def kill_and_reap(process: subprocess.Popen, sig: int) -> None:
     process.send_signal(sig)
     process.wait(timeout=30)
+
+
+def descendants_outlive_s(
+    argv: list[str], below: int, sig: int, cwd: Path, busy_s: float = 10.0
+) -> float:
+    """Start ``argv``, wait until at least ``below`` processes run under it and ``busy_s`` more
+    (they build their envs and are at work), send it ``sig``, and return how long its
+    descendants outlived it (:func:`outlived_s`)."""
+    parent = subprocess.Popen(argv, cwd=cwd, stderr=subprocess.DEVNULL)
+    try:
+        assert wait_for(lambda: len(descendants(parent.pid)) >= below, 120), "nothing started"
+        time.sleep(busy_s)
+        under = descendants(parent.pid)
+        assert all(alive(p) for p in under)
+        kill_and_reap(parent, sig)
+        return outlived_s(under)
+    finally:
+        if parent.poll() is None:
+            parent.kill()

@@ -20,7 +20,6 @@ import sys
 from pathlib import Path
 
 import pytest
-from harness_fakes import write_fake_suite
 
 from awda_bench.harness.results_store import STORE_NAME
 
@@ -57,14 +56,6 @@ def _rows(out: Path) -> list[tuple]:
         ).fetchall()
     finally:
         db.close()
-
-
-@pytest.fixture
-def suites(tmp_path: Path) -> Path:
-    d = tmp_path / "tasks"
-    d.mkdir()
-    write_fake_suite(d)
-    return d
 
 
 def test_a_full_disk_at_store_creation_leaves_no_store_that_later_runs_refuse(

@@ -14,12 +14,11 @@ import signal
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import pytest
 from metaworld_env import needs_metaworld
-from processes import alive, descendants, kill_and_reap, outlived_s, wait_for
+from processes import descendants, descendants_outlive_s, kill_and_reap, outlived_s, wait_for
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
@@ -88,17 +87,7 @@ def test_collect_workers_die_with_collect(tmp_path: Path, sig: signal.Signals, s
     argv = [sys.executable, "-m", "awda_bench", "collect", "--suite", suite, "--split",
             "train", "--episodes-per-task", "4", "--task", first, "--task", second, "--workers",
             "2", "--out", str(out), "--no-progress"]  # fmt: skip
-    parent = subprocess.Popen(argv, cwd=ROOT, stderr=subprocess.DEVNULL)
-    try:
-        assert wait_for(lambda: len(descendants(parent.pid)) >= 2, 120), "no workers started"
-        time.sleep(10)  # the workers build their envs and are recording
-        workers = descendants(parent.pid)
-        assert all(alive(p) for p in workers)
-        kill_and_reap(parent, sig)
-        took = outlived_s(workers)
-    finally:
-        if parent.poll() is None:
-            parent.kill()
+    took = descendants_outlive_s(argv, 2, sig, ROOT)  # the two workers
     assert took <= MAX_OUTLIVE_S, f"collect's workers outlived it by {took:.1f} s"
 
 
@@ -122,15 +111,6 @@ def test_a_sigkilled_reproduce_leaves_no_stage_and_no_workers(tmp_path: Path) ->
         run_stages(config, [stage], command=(sys.executable, "-m", "awda_bench"))
         """
     )
-    parent = subprocess.Popen([sys.executable, "-c", driver], cwd=ROOT, stderr=subprocess.DEVNULL)
-    try:
-        # reproduce -> the stage -> its 2 workers
-        assert wait_for(lambda: len(descendants(parent.pid)) >= 3, 120), "no stage workers"
-        time.sleep(10)
-        below = descendants(parent.pid)
-        kill_and_reap(parent, signal.SIGKILL)
-        took = outlived_s(below)
-    finally:
-        if parent.poll() is None:
-            parent.kill()
+    # reproduce -> the stage -> its 2 workers
+    took = descendants_outlive_s([sys.executable, "-c", driver], 3, signal.SIGKILL, ROOT)
     assert took <= MAX_OUTLIVE_S, f"the stage or its workers outlived reproduce by {took:.1f} s"

@@ -10,18 +10,15 @@ import subprocess
 import sys
 from pathlib import Path
 
-from harness_fakes import write_fake_suite
-
 from awda_bench.cli import main
 from awda_bench.harness.results_store import STORE_NAME
 
 TESTS = Path(__file__).resolve().parent.parent
 
 
-def test_two_runs_at_once_into_one_store_record_every_episode_once(tmp_path: Path) -> None:
-    suites = tmp_path / "tasks"
-    suites.mkdir()
-    write_fake_suite(suites)
+def test_two_runs_at_once_into_one_store_record_every_episode_once(
+    tmp_path: Path, suites: Path
+) -> None:
     env = {**os.environ, "PYTHONPATH": str(TESTS), "AWDA_FAKE_SLEEP_S": "0.01",
            "OMP_NUM_THREADS": "1"}  # fmt: skip
 
