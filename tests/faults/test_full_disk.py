@@ -41,7 +41,12 @@ def _run(command: list[str], file_limit_bytes: int | None) -> subprocess.Complet
         signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
         resource.setrlimit(resource.RLIMIT_FSIZE, (file_limit_bytes, file_limit_bytes))
 
-    env = {**os.environ, "PYTHONPATH": str(TESTS), "OMP_NUM_THREADS": "1"}
+    # No bytecode from the child: under RLIMIT_FSIZE, CPython's .pyc writer keeps a short write
+    # (it ignores write()'s count) and renames the truncated file into __pycache__, where every
+    # later import of that module fails ("marshal data too short"). On a fresh clone (CI) the
+    # first limited child compiled awda_bench's command modules and broke 30 later tests.
+    env = {**os.environ, "PYTHONPATH": str(TESTS), "OMP_NUM_THREADS": "1",
+           "PYTHONDONTWRITEBYTECODE": "1"}  # fmt: skip
     return subprocess.run(
         command, env=env, capture_output=True, text=True, timeout=300,
         preexec_fn=None if file_limit_bytes is None else full_disk,
