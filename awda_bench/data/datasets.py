@@ -12,6 +12,11 @@
                                               trajectory[0] is the TCP at the first frame
         "demo_trajectory" (P, 3 + k)          the same of d (its grasp labels the identification
                                               loss, :mod:`awda_bench.models.identification_loss`)
+        "contact", "demo_contact" (4,)        only with ``contact_points=True``: the TCP xyz
+                                              where a (d) first moves the task's object, and 1;
+                                              zeros where none (the identification label of
+                                              episodes without a grasp,
+                                              :mod:`awda_bench.data.contact_point`)
         "head"        ()  int64               0
         "camera"      ()  int64               the index of a's third-person camera among
                                               ``cameras`` (the distinct cameras of the pairs'
@@ -53,6 +58,7 @@ import torch
 
 from awda_bench.data.collect import MANIFEST
 from awda_bench.data.config import ROLE_AGENT, ROLE_DEMONSTRATOR, ROLE_SYNTHESIZED
+from awda_bench.data.contact_point import first_object_motion
 from awda_bench.data.trajectory_file import decode_jpeg, load_unit_json
 from awda_bench.episode import demo_frame_indices
 from awda_bench.errors import CorruptFileError, UsageError
@@ -203,6 +209,21 @@ class CollectedData:
         """(T + 1, 3) TCP positions, world frame [m]."""
         return self._read(ref, "obs/extra/tcp_pose")[:, :3].astype(np.float64)
 
+    def contact_point(self, ref: EpisodeRef) -> np.ndarray:
+        """``(4,)`` float32: the TCP [m] where the episode first moves the scene's object and 1,
+        or zeros where it has no such moment (:mod:`awda_bench.data.contact_point`). Read from
+        the recorded joint state: Meta-World's ``env_states/qpos``, whose leading joints are the
+        robot's ``obs/agent/qpos``; ManiSkill's episodes record their state per actor, not as
+        one joint vector, and have no contact point (zeros)."""
+        group = self.group(ref)
+        if "env_states/qpos" not in group or "obs/agent/qpos" not in group:
+            return np.zeros(4, np.float32)
+        robot_joints = group["obs/agent/qpos"].shape[1]
+        step = first_object_motion(self._read(ref, "env_states/qpos")[:, robot_joints:])
+        if step is None:
+            return np.zeros(4, np.float32)
+        return np.append(self.tcp_pos(ref)[step], 1.0).astype(np.float32)
+
     def attributes(self, ref: EpisodeRef, names: Iterable[str]) -> np.ndarray:
         """(T, k) mined attributes as floats."""
         cols = [self._read(ref, f"attributes/{n}").astype(np.float32) for n in names]
@@ -278,6 +299,7 @@ class AwdaPairDataset:
         include_synthesized: bool = True,
         allow_test: bool = False,
         cameras: Sequence[CameraMatrices] | None = None,
+        contact_points: bool = False,
     ) -> None:
         _check_split(data, allow_test)
         if demo_frames < 2 or trajectory_points < 2:
@@ -287,6 +309,7 @@ class AwdaPairDataset:
         self.trajectory_points = trajectory_points
         self.attributes = attributes
         self.image_size = image_size
+        self.contact_points = contact_points
         agents = data.select(ROLE_AGENT, selection)
         demos = data.select(ROLE_DEMONSTRATOR, selection)
         self.pairs: list[tuple[EpisodeRef, EpisodeRef, int]] = []
@@ -343,11 +366,19 @@ class AwdaPairDataset:
             self.trajectory_points,
         )
 
+    def contact(self, ref: EpisodeRef) -> np.ndarray:
+        """The ``"contact"`` label of an episode ``(4,)`` (``"demo_contact"`` of a
+        demonstrator's): :meth:`CollectedData.contact_point` for task-driven episodes, zeros
+        (no label) for synthesized ones, whose touches demonstrate nothing."""
+        if ref.role == ROLE_SYNTHESIZED:
+            return np.zeros(4, np.float32)
+        return self.data.contact_point(ref)
+
     def __getitem__(self, index: int) -> dict[str, torch.Tensor]:
         agent, demo, head = self.pairs[index]
         demo_idx = demo_frame_indices(demo.steps, self.demo_frames)
         trajectory = self.trajectory(agent)
-        return {
+        sample = {
             "demo": frames_tensor(self.data.frames(demo, demo_idx), self.image_size),
             "first_frame": frames_tensor(self.data.frames(agent, [0]), self.image_size)[0],
             "trajectory": torch.from_numpy(trajectory),
@@ -355,6 +386,10 @@ class AwdaPairDataset:
             "head": torch.tensor(head, dtype=torch.int64),
             "camera": torch.tensor(self.pair_camera[index], dtype=torch.int64),
         }
+        if self.contact_points:
+            sample["contact"] = torch.from_numpy(self.contact(agent))
+            sample["demo_contact"] = torch.from_numpy(self.contact(demo))
+        return sample
 
 
 class TosviDataset:

@@ -215,6 +215,8 @@ class AwdaNet(nn.Module):
                 self.ray_cameras,  # AwdaConfig checks there is one
                 camera,
                 self.grid,
+                demo_contact=batch.get("demo_contact"),
+                contact=batch.get("contact"),
             )
             loss = loss + cfg.identification_weight * found
             info.update(found_info)

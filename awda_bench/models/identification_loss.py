@@ -14,7 +14,10 @@ waypoints do; no simulator state::
     o_1 cell    where the agent trajectory's first grasping point is, projected onto o_1's grid
                                                                    -> CE on the object logits
 
-Rows without a grasp (synthesized trajectories, tasks that never close the gripper) are left out.
+Rows without a grasp (synthesized trajectories, tasks that never close the gripper) are left out,
+unless the batch carries contact points (``"contact"``, ``"demo_contact"``: where the hand first
+moves the task's object, :mod:`awda_bench.data.contact_point`; ``ModelRecipe.identification_contact``),
+which then label the rows that never grasp: Meta-World's pushes.
 A deviation from the reference, which trains on the Soft-DTW loss alone; it is stated where it is
 switched on (``AwdaConfig.identification_weight``, the recipe files).
 """
@@ -33,15 +36,25 @@ GRASP_ATTRIBUTE = 0
 
 
 def grasp_cells(
-    trajectory: torch.Tensor, camera: Camera, grid: tuple[int, int]
+    trajectory: torch.Tensor,
+    camera: Camera,
+    grid: tuple[int, int],
+    contact: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """``trajectory (B, P, 3 + k)`` (world xyz [m], attributes in [0, 1]) -> the grid cell
     ``(B,)`` of each row's first grasping point seen through ``camera``, and ``(B,)`` bool: the row
-    grasps at all and the point is in front of the camera."""
+    has a point and it is in front of the camera. ``contact (B, 4)`` (xyz, flag; the datasets'
+    ``"contact"``): a row that never grasps takes its contact point instead where the flag is
+    set (:mod:`awda_bench.data.contact_point`)."""
     intrinsic, extrinsic, (height, width) = camera
     grasping = trajectory[..., 3 + GRASP_ATTRIBUTE] > 0.5  # (B, P)
     first = torch.argmax(grasping.to(torch.int8), dim=1)  # first True (0 when none)
     point = trajectory[torch.arange(len(trajectory)), first, :3].double()
+    has_point = grasping.any(dim=1)
+    if contact is not None:
+        touched = ~has_point & (contact[:, 3] > 0.5)
+        point = torch.where(touched[:, None], contact[:, :3].to(point), point)
+        has_point = has_point | touched
     cam = point @ extrinsic[:, :3].T.to(point) + extrinsic[:, 3].to(point)
     uvw = cam @ intrinsic.T.to(point)
     ahead = uvw[:, 2] > 1e-6
@@ -49,7 +62,7 @@ def grasp_cells(
     h, w = grid
     row = torch.floor(uv[:, 1] * h / height).clamp(0, h - 1).long()
     col = torch.floor(uv[:, 0] * w / width).clamp(0, w - 1).long()
-    return row * w + col, grasping.any(dim=1) & ahead
+    return row * w + col, has_point & ahead
 
 
 def grasp_cells_per_camera(
@@ -57,16 +70,19 @@ def grasp_cells_per_camera(
     cameras: Sequence[Camera],
     camera: torch.Tensor | None,
     grid: tuple[int, int],
+    contact: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """:func:`grasp_cells` with each row seen through its own camera: ``cameras[camera[i]]``
     (``camera`` ``None``: every row through the first)."""
     if camera is None or len(cameras) == 1:
-        return grasp_cells(trajectory, cameras[0], grid)
+        return grasp_cells(trajectory, cameras[0], grid, contact)
     cells = torch.zeros(len(trajectory), dtype=torch.long, device=trajectory.device)
     ok = torch.zeros(len(trajectory), dtype=torch.bool, device=trajectory.device)
     for index in torch.unique(camera).tolist():
         rows = camera == index
-        cells[rows], ok[rows] = grasp_cells(trajectory[rows], cameras[index], grid)
+        cells[rows], ok[rows] = grasp_cells(
+            trajectory[rows], cameras[index], grid, None if contact is None else contact[rows]
+        )
     return cells, ok
 
 
@@ -78,12 +94,17 @@ def identification_loss(
     cameras: Sequence[Camera],
     camera: torch.Tensor | None,
     grid: tuple[int, int],
+    demo_contact: torch.Tensor | None = None,
+    contact: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, dict[str, float]]:
     """Mean of the two cross-entropies (module docstring) over the rows where both the demo and
-    the agent trajectory grasp; zero (with the graph) when none does. ``*_logits (B, h*w)``;
-    each row projects through ``cameras[camera[row]]`` (``camera`` ``None``: the first)."""
-    demo_cell, demo_ok = grasp_cells_per_camera(demo_trajectory, cameras, camera, grid)
-    agent_cell, agent_ok = grasp_cells_per_camera(trajectory, cameras, camera, grid)
+    the agent trajectory grasp (or, given ``*contact (B, 4)``, have a contact point where they
+    never grasp); zero (with the graph) when none does. ``*_logits (B, h*w)``; each row projects
+    through ``cameras[camera[row]]`` (``camera`` ``None``: the first)."""
+    demo_cell, demo_ok = grasp_cells_per_camera(
+        demo_trajectory, cameras, camera, grid, demo_contact
+    )
+    agent_cell, agent_ok = grasp_cells_per_camera(trajectory, cameras, camera, grid, contact)
     rows = demo_ok & agent_ok
     if not bool(rows.any()):
         zero = (moved_logits.sum() + object_logits.sum()) * 0.0

@@ -9,6 +9,7 @@ frames it reads (``frames_needed``, ``tosvi_frames_needed``) so the cache encode
     "demo_features"        (demo_frames, C, h, w) float32
     "first_frame_features" (C, h, w) float32
     "trajectory", "demo_trajectory", "head", "camera"   as AwdaPairDataset
+    "contact", "demo_contact"                           as AwdaPairDataset (contact_points=True)
 
 :class:`CachedTosviSamples` (:class:`~awda_bench.data.datasets.TosviDataset`)::
 
@@ -62,6 +63,15 @@ class CachedAwdaPairs:
             for agent, demo, _ in pairs.pairs
             for ref in (agent, demo)
         }
+        self._contacts = (
+            {
+                _key(ref): torch.from_numpy(pairs.contact(ref))
+                for agent, demo, _ in pairs.pairs
+                for ref in (agent, demo)
+            }
+            if pairs.contact_points
+            else {}
+        )
 
     def __len__(self) -> int:
         return len(self.pairs)
@@ -70,7 +80,7 @@ class CachedAwdaPairs:
         agent, demo, head = self.pairs.pairs[index]
         demo_idx = demo_frame_indices(demo.steps, self.pairs.demo_frames)
         first = self.cache.features(self._names[_key(agent)], np.zeros(1, np.int64))
-        return {
+        sample = {
             "demo_features": self.cache.features(self._names[_key(demo)], demo_idx),
             "first_frame_features": first[0],
             "trajectory": self._labels[_key(agent)],
@@ -78,6 +88,10 @@ class CachedAwdaPairs:
             "head": torch.tensor(head, dtype=torch.int64),
             "camera": torch.tensor(self.pairs.pair_camera[index], dtype=torch.int64),
         }
+        if self._contacts:
+            sample["contact"] = self._contacts[_key(agent)]
+            sample["demo_contact"] = self._contacts[_key(demo)]
+        return sample
 
 
 def tosvi_frames_needed(samples: TosviDataset) -> list[tuple[EpisodeRef, np.ndarray]]:

@@ -102,6 +102,10 @@ class ModelRecipe:
     identification_weight: float = 0.0
     """``demo-pointer`` only: weight of the identification loss beside the Soft-DTW loss
     (:mod:`awda_bench.models.identification_loss`; 0: Soft-DTW alone, as the reference)."""
+    identification_contact: bool = False
+    """``demo-pointer`` with the identification loss: episodes that never grasp are labelled by
+    where the hand first moves the task's object (:mod:`awda_bench.data.contact_point`; Meta-World's
+    pushes); ``False``: by the first grasp only, rows without one left out."""
     ray_height_offset_m: float = 0.05
     """Cell heads on camera rays: how far a cell's vote may set its height from its waypoint's
     (``AwdaConfig.ray_height_offset_m``)."""

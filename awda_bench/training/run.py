@@ -336,6 +336,7 @@ def make_dataset(
             selection=selection,
             include_synthesized=synthesized,
             allow_test=validation,
+            contact_points=m.identification_contact and m.identification_weight > 0,
         )
     return TosviDataset(
         data,
