@@ -128,6 +128,32 @@ def test_grasp_cells_project_the_first_grasping_point() -> None:
     assert grasps.tolist() == [True, False]  # row 1 never grasps: no label
 
 
+def test_a_row_without_a_grasp_takes_its_contact_point() -> None:
+    """Meta-World's pushes: the contact point labels the rows that never grasp; a grasp keeps
+    precedence; a row with neither (or with an unset flag) stays out."""
+    camera = (torch.tensor(K), torch.tensor(E), (240, 320))
+
+    def cell(point: np.ndarray) -> int:
+        cam = E[:, :3] @ point + E[:, 3]
+        u, v = (K @ cam)[:2] / cam[2]
+        return int(v // 16) * 20 + int(u // 16)
+
+    grasp_point, touched = np.array([-0.1, 0.05, 0.02]), np.array([0.1, -0.05, 0.05])
+    trajectory = torch.zeros(3, 6, 4, dtype=torch.float32)
+    trajectory[:, :, :3] = torch.tensor([0.3, 0.3, 0.3])
+    trajectory[0, 2:, :3] = torch.tensor(grasp_point, dtype=torch.float32)
+    trajectory[0, 2:, 3] = 1.0  # row 0 grasps
+    contact = torch.zeros(3, 4)
+    contact[:2, :3] = torch.tensor(touched, dtype=torch.float32)
+    contact[:2, 3] = 1.0  # rows 0 and 1 touch; row 2 has no contact
+    cells, ok = grasp_cells(trajectory, camera, (15, 20), contact)
+    assert ok.tolist() == [True, True, False]
+    assert [int(c) for c in cells[:2]] == [cell(grasp_point), cell(touched)]
+    assert cell(grasp_point) != cell(touched)
+    without, ok_without = grasp_cells(trajectory, camera, (15, 20))
+    assert ok_without.tolist() == [True, False, False] and int(without[0]) == int(cells[0])
+
+
 def test_identification_weight_needs_the_pointer_and_a_camera() -> None:
     camera = {
         "camera_intrinsic": tuple(K.ravel()),

@@ -202,6 +202,26 @@ def test_the_training_datasets_read_it(tiny: Path) -> None:
     data.close()
 
 
+@needs_metaworld
+def test_contact_points_label_where_the_hand_first_moves_the_object(tiny: Path) -> None:
+    """The identification label of episodes without a grasp (``contact_points=True``): on
+    pick-place the hand first moves the puck where it grasps it; reach moves nothing; a
+    synthesized path's touches label nothing."""
+    data = CollectedData(tiny)
+    pairs = AwdaPairDataset(data, contact_points=True)
+    by_origin = {(agent.task, agent.role): i for i, (agent, _, _) in enumerate(pairs.pairs)}
+    pick = pairs[by_origin[(PICK, "agent")]]
+    assert pick["contact"][3] == 1.0 and pick["demo_contact"][3] == 1.0
+    agent = pairs.pairs[by_origin[(PICK, "agent")]][0]
+    grasping = np.flatnonzero(data.attributes(agent, ("grasp",))[:, 0])
+    first_grasp = data.tcp_pos(agent)[grasping[0]]
+    assert np.linalg.norm(pick["contact"][:3].numpy() - first_grasp) < 0.02
+    assert pairs[by_origin[(REACH, "agent")]]["contact"].tolist() == [0.0] * 4
+    assert pairs[by_origin[(PICK, "synthesized")]]["contact"].tolist() == [0.0] * 4
+    assert "contact" not in AwdaPairDataset(data)[0]  # off unless asked for
+    data.close()
+
+
 @pytest.mark.slow
 @needs_metaworld
 def test_synthesized_trajectories_are_feasible_free_space_motion(tiny: Path) -> None:
