@@ -2,7 +2,7 @@
 # One entry point for a fresh machine:
 #
 #   bash scripts/setup.sh quick   # set up, then run the main job on a small default and write reports/quick/ (the committed reports/ stay)
-#   bash scripts/setup.sh test    # set up, then run the test suite (tox)
+#   bash scripts/setup.sh test    # set up, then run the test suite and build the docs site (tox)
 #   bash scripts/setup.sh         # set up only
 #
 # Set-up = (1) a Vulkan device SAPIEN accepts (on a GPU-less Debian 12 that is Mesa >= 24.3 from
@@ -132,6 +132,6 @@ ensure_metaworld_venv
 case "$what" in
   setup) "$PY" -m tox run -e py --notest ;;
   quick) "$PY" -m tox run -e quick ;;
-  test)  "$PY" -m tox run -e py,smoke,lint ;;
+  test)  "$PY" -m tox run -e py,smoke,lint,docs ;;
   *) echo "usage: bash scripts/setup.sh [setup|quick|test]" >&2; exit 2 ;;
 esac
