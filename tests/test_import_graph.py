@@ -1,7 +1,7 @@
 """The package's import graph has no cycles: none between modules, none between rooms.
 
 A *room* is a subpackage of ``awda_bench`` (``robot``, ``envs``, ``harness``, ...) or a top-level
-module (``episode``, ``reproduce``, ...); rooms import only downward (README, "Layout"). The graph
+module (``episode``, ``reproduce``, ...); rooms import only downward (docs/design.md, "Layout"). The graph
 is read from the source with :mod:`ast`: every ``import`` and ``from ... import``, relative ones
 and those inside functions or under ``TYPE_CHECKING`` included. ``from package import name``
 counts as importing the submodule ``package.name`` when there is one, else the package itself.

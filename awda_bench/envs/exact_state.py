@@ -209,7 +209,7 @@ class ExactStateEnv(BaseEnv):
 
         Rebuilding is the one exact fix found: the scene's memory of earlier episodes is not all
         reachable (see the module docstring). It costs the scene build on every seeded reset
-        (measured 0.21-0.34 s per reset against 3-17 ms, README "Numbers"); a caller who wants the
+        (measured 0.21-0.34 s per reset against 3-17 ms, docs/numbers.md, "Seeded resets"); a caller who wants the
         cheap reset and accepts the history dependence passes ``options={"reconfigure": False}``.
         Handles to actors, the agent or its controllers taken before a rebuild refer to the old
         scene.
