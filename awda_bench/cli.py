@@ -16,7 +16,7 @@ from collections.abc import Sequence
 
 from awda_bench.commands import COMMANDS
 from awda_bench.errors import AwdaError, StorageError
-from awda_bench.harness.parent_death import die_with_parent_from_env
+from awda_bench.execution.parent_death import die_with_parent_from_env
 
 
 def build_parser() -> argparse.ArgumentParser:

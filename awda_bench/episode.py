@@ -3,7 +3,8 @@
 :class:`EpisodeSpec`, :class:`EpisodeContext`, :class:`Observations` and :class:`Policy` are
 shared by everything that plays episodes (the scripted experts, demo recording, the primitives,
 the evaluated methods, the harness and the collector), so they sit below all of them and import
-nothing of the package but its errors.
+nothing of the package but its errors. :func:`derive_seed` gives an episode its seeds (and a
+collection attempt its own) from its identity, never from a shared generator.
 
 Timeline of one episode (``T = suite.horizon_steps`` control steps)::
 
@@ -28,6 +29,7 @@ process, sees only what crosses the socket.)
 
 from __future__ import annotations
 
+import hashlib
 import random
 import sys
 from dataclasses import dataclass
@@ -62,6 +64,12 @@ class EpisodeSpec:
     """Seed of the agent's scene (``env.reset(seed=seed)``)."""
     demo_seed: int
     """Seed of the demonstrator's scene (a different layout of the same task)."""
+
+
+def derive_seed(suite: str, base_seed: int, task: int, episode: int, role: str) -> int:
+    """A seed in ``[0, 2**31)`` from a hash of the episode's identity and ``role`` (agent/demo)."""
+    key = f"{suite}|{base_seed}|{task}|{episode}|{role}".encode()
+    return int.from_bytes(hashlib.sha256(key).digest()[:4], "little") & 0x7FFF_FFFF
 
 
 @dataclass(frozen=True)
@@ -103,7 +111,7 @@ def demo_frame_indices(steps: int, count: int) -> np.ndarray:
 @runtime_checkable
 class Observations(Protocol):
     """What an observation-only policy may see of its episode (the harness's implementation is
-    :class:`awda_bench.harness.observations.SimObservations`). Frames render when asked for
+    :class:`awda_bench.evaluation.observations.SimObservations`). Frames render when asked for
     (~50 ms each on a CPU renderer), so ask only for those the method uses."""
 
     num_envs: int
@@ -182,7 +190,7 @@ def observations_of(ctx: EpisodeContext) -> Observations:
     if ctx.observations is None:
         raise RuntimeError(
             "this EpisodeContext carries no observations; build it with observations=... "
-            "(the harness does: awda_bench.harness.observations.SimObservations)"
+            "(the harness does: awda_bench.evaluation.observations.SimObservations)"
         )
     return ctx.observations
 

@@ -19,7 +19,7 @@ and the CLI stay one program in ``.venv``.
 
 With ``--backend ray`` the actors are Ray's per-actor runtime environment: ``py_executable`` names
 the second environment's interpreter and ``PYTHONPATH`` this checkout, so an actor imports
-Meta-World's MuJoCo, never the driver's (:class:`~awda_bench.harness.ray_pool.RayActorPool`). That
+Meta-World's MuJoCo, never the driver's (:class:`~awda_bench.execution.ray_pool.RayActorPool`). That
 environment holds Ray too, at the driver's version (checked at start: :func:`check_worker_ray`).
 On a cluster every node needs the checkout and ``.venv-metaworld`` at the same paths.
 """
@@ -28,7 +28,9 @@ from __future__ import annotations
 
 import json
 import os
+import platform
 import subprocess
+from importlib import metadata
 from pathlib import Path
 
 from awda_bench.errors import UsageError
@@ -120,3 +122,26 @@ def worker_versions(simulator: str) -> dict[str, str]:
     out = subprocess.run([python, "-c", code, *names], capture_output=True, text=True, check=True)
     venv = SECOND_VENVS[simulator]
     return {f"{venv} {k}": str(v) for k, v in json.loads(out.stdout).items()}
+
+
+VERSIONED_PACKAGES = (
+    "awda_bench",
+    "mani-skill",
+    "sapien",
+    "mink",
+    "mujoco",
+    "gymnasium",
+    "torch",
+    "numpy",
+)
+"""Packages whose versions are recorded with every run and printed in the report header."""
+
+
+def software_versions() -> dict[str, str]:
+    versions = {"python": platform.python_version()}
+    for name in VERSIONED_PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = "not installed"
+    return versions

@@ -10,7 +10,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from awda_bench.harness.env_factory import make_env
+from awda_bench.evaluation.env_factory import make_env
 from awda_bench.suites import Suite
 
 

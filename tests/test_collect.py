@@ -27,8 +27,8 @@ from awda_bench.data.collect import MANIFEST, run_collect
 from awda_bench.data.config import CollectConfig, parse_image_size
 from awda_bench.data.plan import job_seed, make_plan, split_tasks
 from awda_bench.data.trajectory_file import PARTIAL_DIR, decode_jpeg
+from awda_bench.episode import derive_seed
 from awda_bench.errors import CorruptFileError, UsageError
-from awda_bench.harness.episode_specs import derive_seed
 from awda_bench.suites import load_suite
 
 TINY_ARGS = [

@@ -199,8 +199,8 @@ def test_fig_s6_draws_each_synthesized_path_where_the_camera_sees_it(
 ) -> None:
     import cv2
 
-    from awda_bench.data.synthesis_figure import synthesized_panel
-    from awda_bench.harness.figures import project_points
+    from awda_bench.reporting.figures import project_points
+    from awda_bench.reporting.synthesis_figure import synthesized_panel
 
     (ref,) = data.select("synthesized")
     frame = data.frames(ref, [0])[0]

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from awda_bench.episode import EpisodeSpec
-from awda_bench.harness.methods import get_method, select_snapshots
-from awda_bench.harness.sweep import SUITES_DIR
-from awda_bench.harness.worker_pool import EpisodeExecutor, Job, WorkerConfig
+from awda_bench.evaluation.methods import get_method, select_snapshots
+from awda_bench.evaluation.sweep import SUITES_DIR
+from awda_bench.evaluation.worker_pool import EpisodeExecutor, Job, WorkerConfig
 
 EARLIER = EpisodeSpec("pick_place", 14, 0, 1001, 2001)
 LATER = EpisodeSpec("pick_place", 14, 1, 1002, 2002)

@@ -5,10 +5,10 @@ from pathlib import Path
 import pytest
 from harness_fakes import write_fake_suite
 
+from awda_bench.episode import derive_seed
 from awda_bench.errors import UsageError
-from awda_bench.harness.episode_specs import (
+from awda_bench.evaluation.episode_specs import (
     build_episode_specs,
-    derive_seed,
     make_protocol,
     protocol_drift,
 )

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from awda_bench.errors import CorruptFileError, UsageError
-from awda_bench.harness.methods import get_method, select_snapshots
+from awda_bench.evaluation.methods import get_method, select_snapshots
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 NON_LEARNED = "awda_example_policies.wrist_descend:WristDescendPolicy"

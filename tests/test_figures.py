@@ -5,7 +5,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from awda_bench.harness.figures import (
+from awda_bench.reporting.figures import (
     GRASP_RGB,
     PRESS_RGB,
     RED_BRIGHT_RGB,

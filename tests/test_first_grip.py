@@ -15,8 +15,8 @@ import pandas as pd
 from harness_fakes import FakeEnv, SkillPolicy, write_fake_suite
 
 from awda_bench.episode import EpisodeSpec
-from awda_bench.harness.aggregate import FIRST_GRIP_COLUMNS, grasp_analysis
-from awda_bench.harness.episode_runner import run_episode
+from awda_bench.evaluation.episode_runner import run_episode
+from awda_bench.reporting.aggregate import FIRST_GRIP_COLUMNS, grasp_analysis
 from awda_bench.suites import load_suite
 
 

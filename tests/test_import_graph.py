@@ -1,6 +1,6 @@
 """The package's import graph has no cycles: none between modules, none between rooms.
 
-A *room* is a subpackage of ``awda_bench`` (``robot``, ``envs``, ``harness``, ...) or a top-level
+A *room* is a subpackage of ``awda_bench`` (``robot``, ``envs``, ``evaluation``, ...) or a top-level
 module (``episode``, ``reproduce``, ...); rooms import only downward (docs/design.md, "Layout"). The graph
 is read from the source with :mod:`ast`: every ``import`` and ``from ... import``, relative ones
 and those inside functions or under ``TYPE_CHECKING`` included. ``from package import name``
@@ -72,7 +72,7 @@ def import_graph() -> dict[str, dict[str, int]]:
 
 
 def room(module: str) -> str:
-    """``awda_bench.harness.sweep`` -> ``harness``; ``awda_bench.episode`` -> ``episode``."""
+    """``awda_bench.evaluation.sweep`` -> ``evaluation``; ``awda_bench.episode`` -> ``episode``."""
     parts = module.split(".")
     return parts[1] if len(parts) > 1 else parts[0]
 
@@ -121,8 +121,8 @@ def test_the_graph_sees_imports_at_every_depth() -> None:
     graph = import_graph()
     assert len(graph) > 100
     # module level, inside a function, relative to nothing: all seen
-    assert f"{PACKAGE}.harness.sweep" in graph[f"{PACKAGE}.commands.run"]
-    assert f"{PACKAGE}.harness.videos" in graph[f"{PACKAGE}.commands.run"]  # inside run()
+    assert f"{PACKAGE}.evaluation.sweep" in graph[f"{PACKAGE}.commands.run"]
+    assert f"{PACKAGE}.reporting.videos" in graph[f"{PACKAGE}.commands.run"]  # inside run()
     assert f"{PACKAGE}.robot.demonstrator" in graph[f"{PACKAGE}.envs"]  # from robot import module
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from metaworld_env import metaworld_python, needs_metaworld
 
-from awda_bench.harness.results_store import ResultsStore
-from awda_bench.harness.sweep import SweepConfig, run_sweep
+from awda_bench.evaluation.results_store import ResultsStore
+from awda_bench.evaluation.sweep import SweepConfig, run_sweep
 from awda_bench.metaworld.sawyer import STEP_M, TRACKING_GAIN, mocap_action, tracking_command
 from awda_bench.runtimes import PROJECT_ROOT
 from awda_bench.suites import load_suite

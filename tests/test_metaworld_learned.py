@@ -23,8 +23,8 @@ from metaworld_env import needs_metaworld
 
 from awda_bench.episode import EpisodeContext, EpisodeSpec, Proprioception, WristDepth
 from awda_bench.errors import UsageError
-from awda_bench.harness.results_store import ResultsStore
-from awda_bench.harness.sweep import SweepConfig, run_sweep
+from awda_bench.evaluation.results_store import ResultsStore
+from awda_bench.evaluation.sweep import SweepConfig, run_sweep
 from awda_bench.metaworld.sawyer import (
     SAWYER_EXECUTOR,
     SAWYER_LOCALIZATION,

@@ -22,9 +22,9 @@ from metaworld_env import metaworld_python, needs_metaworld
 
 from awda_bench.episode import EpisodeContext, EpisodeSpec
 from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
-from awda_bench.harness.episode_runner import run_episode
-from awda_bench.harness.results_store import ResultsStore
-from awda_bench.harness.sweep import SweepConfig, prepare_sweep, run_sweep
+from awda_bench.evaluation.episode_runner import run_episode
+from awda_bench.evaluation.results_store import ResultsStore
+from awda_bench.evaluation.sweep import SweepConfig, prepare_sweep, run_sweep
 from awda_bench.metaworld_tasks import ALL_TASKS, ML45_TEST, REFERENCE_HELD_OUT
 from awda_bench.runtimes import MissingEnvironmentError
 from awda_bench.suites import SUITES_DIR, load_suite

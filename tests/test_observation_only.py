@@ -11,9 +11,9 @@ from harness_fakes import write_fake_suite
 
 from awda_bench.episode import EpisodeContext, EpisodeSpec, is_privileged
 from awda_bench.errors import PrivilegedAccessError
-from awda_bench.harness.methods import MethodSpec, register_method, unregister_method
-from awda_bench.harness.results_store import ResultsStore
-from awda_bench.harness.sweep import SweepConfig, run_sweep
+from awda_bench.evaluation.methods import MethodSpec, register_method, unregister_method
+from awda_bench.evaluation.results_store import ResultsStore
+from awda_bench.evaluation.sweep import SweepConfig, run_sweep
 
 METHODS = (
     MethodSpec("env-reading", "harness_fakes:EnvReadingPolicy"),
@@ -70,7 +70,7 @@ def test_a_privileged_method_reads_the_env(tmp_path: Path) -> None:
 
 
 def test_the_tables_mark_the_privileged_rows(tmp_path: Path) -> None:
-    from awda_bench.harness.report import write_report
+    from awda_bench.reporting.report import write_report
 
     out = tmp_path / "store"
     _sweep(tmp_path, "privileged-env-reading", out)
@@ -83,7 +83,7 @@ def test_the_tables_mark_the_privileged_rows(tmp_path: Path) -> None:
 
 def test_a_declaration_that_disagrees_with_the_registration_is_refused() -> None:
     from awda_bench.errors import UsageError
-    from awda_bench.harness.methods import BUILTIN_SNAPSHOT, SnapshotRef, make_policy
+    from awda_bench.evaluation.methods import BUILTIN_SNAPSHOT, SnapshotRef, make_policy
 
     snapshot = SnapshotRef(BUILTIN_SNAPSHOT, BUILTIN_SNAPSHOT, None, 0)
     unflagged = MethodSpec("unflagged", "harness_fakes:PrivilegedEnvReadingPolicy")
@@ -120,9 +120,9 @@ def test_a_context_without_the_env_says_so_in_one_line() -> None:
 def test_the_observations_have_the_documented_shapes_on_the_real_env() -> None:
     import numpy as np
 
-    from awda_bench.harness.env_factory import make_env
-    from awda_bench.harness.episode_runner import fresh_scene_options
-    from awda_bench.harness.observations import SimObservations
+    from awda_bench.evaluation.env_factory import make_env
+    from awda_bench.evaluation.episode_runner import fresh_scene_options
+    from awda_bench.evaluation.observations import SimObservations
     from awda_bench.suites import load_suite
 
     suite = load_suite("pick_place")
@@ -157,7 +157,7 @@ def test_the_first_frame_is_the_one_at_reset(monkeypatch: pytest.MonkeyPatch) ->
 
     import numpy as np
 
-    from awda_bench.harness.observations import SimObservations
+    from awda_bench.evaluation.observations import SimObservations
 
     renders = iter(np.full((1, 2, 2, 3), i, np.uint8) for i in range(10))
     monkeypatch.setattr("awda_bench.robot.cameras.capture_rgb", lambda env: next(renders))

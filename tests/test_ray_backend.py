@@ -1,4 +1,5 @@
-"""The Ray backend (awda_bench/harness/ray_pool.py, backends.py) on the fake suite, on a private
+"""The Ray backend (awda_bench/execution/ray_pool.py, backends.py; the evaluation's pool in
+awda_bench/evaluation/episode_pools.py) on the fake suite, on a private
 local Ray instance: same outcomes and tables as the local pool, every planned episode recorded once
 when an actor is killed, the watchdog, resume after the driver is killed, and the install hint
 when Ray is missing. Every test starts (and stops) its own Ray instance: ~3-5 s each."""
@@ -19,12 +20,12 @@ import pytest
 from harness_fakes import write_fake_suite
 
 from awda_bench.cli import main
-from awda_bench.harness.episode_record import STATUS_ERROR, STATUS_OK, EpisodeRecord
-from awda_bench.harness.episode_specs import build_episode_specs, make_protocol
-from awda_bench.harness.job_pool import WorkerStartError
-from awda_bench.harness.methods import BUILTIN_SNAPSHOT, MethodSpec, SnapshotRef
-from awda_bench.harness.results_store import STORE_NAME
-from awda_bench.harness.worker_pool import Job, WorkerConfig
+from awda_bench.evaluation.episode_record import STATUS_ERROR, STATUS_OK, EpisodeRecord
+from awda_bench.evaluation.episode_specs import build_episode_specs, make_protocol
+from awda_bench.evaluation.methods import BUILTIN_SNAPSHOT, MethodSpec, SnapshotRef
+from awda_bench.evaluation.results_store import STORE_NAME
+from awda_bench.evaluation.worker_pool import Job, WorkerConfig
+from awda_bench.execution.job_pool import WorkerStartError
 from awda_bench.suites import load_suite
 
 if os.environ.get("CI"):
@@ -32,7 +33,8 @@ if os.environ.get("CI"):
 else:
     ray = pytest.importorskip("ray", reason="the 'ray' extra is not installed")
 
-from awda_bench.harness.ray_pool import LOST_WORKER_RETRIES, RayWorkerPool  # noqa: E402
+from awda_bench.evaluation.episode_pools import RayWorkerPool  # noqa: E402
+from awda_bench.execution.ray_pool import LOST_WORKER_RETRIES  # noqa: E402
 
 TESTS = Path(__file__).resolve().parent
 FAKES = "harness_fakes"

@@ -7,12 +7,12 @@ import pytest
 from harness_fakes import write_fake_suite, write_snapshots
 
 from awda_bench.errors import UsageError
-from awda_bench.harness.aggregate import family_key, mean_se
-from awda_bench.harness.methods import MethodSpec, register_method, unregister_method
-from awda_bench.harness.report import write_report
-from awda_bench.harness.results_store import STORE_NAME
-from awda_bench.harness.sweep import SweepConfig, run_sweep
-from awda_bench.harness.tables import to_latex, to_markdown
+from awda_bench.evaluation.methods import MethodSpec, register_method, unregister_method
+from awda_bench.evaluation.results_store import STORE_NAME
+from awda_bench.evaluation.sweep import SweepConfig, run_sweep
+from awda_bench.reporting.aggregate import family_key, mean_se
+from awda_bench.reporting.report import write_report
+from awda_bench.reporting.tables import to_latex, to_markdown
 
 FAKES = "harness_fakes"
 
@@ -156,7 +156,7 @@ def test_per_task_table_counts_each_tasks_ok_episodes_and_successes(
 def test_grasp_waypoint_spread_follows_the_scene_not_a_constant() -> None:
     import pandas as pd
 
-    from awda_bench.harness.aggregate import grasp_waypoint_spread_cm
+    from awda_bench.reporting.aggregate import grasp_waypoint_spread_cm
 
     def wps(x: float, y: float) -> str:  # free point, grasp point, release
         return json.dumps([[0, 0, 0.2, 0], [x, y, 0.05, 1], [0.1, 0.1, 0.1, 1]])

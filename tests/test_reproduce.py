@@ -19,7 +19,7 @@ import pytest
 
 from awda_bench.cli import main
 from awda_bench.errors import ProtocolMismatchError, UnknownChoiceError, UsageError
-from awda_bench.harness.sweep import SweepConfig
+from awda_bench.evaluation.sweep import SweepConfig
 from awda_bench.reproduce.config import ReproduceConfig, parse_columns
 from awda_bench.reproduce.plan import Stage, plan_stages
 from awda_bench.reproduce.stages import (

@@ -1,4 +1,4 @@
-"""The results page (awda_bench/harness/results_page.py) and what it is built from: the stratified
+"""The results page (awda_bench/reporting/results_page.py) and what it is built from: the stratified
 bootstrap CI (bootstrap_ci.py), the index (results_index.py) and the paper's values
 (paper_values.py). Every source directory here is a tiny one the test writes itself."""
 
@@ -14,16 +14,16 @@ import pytest
 
 from awda_bench.cli import main
 from awda_bench.errors import UsageError
-from awda_bench.harness import paper_values
-from awda_bench.harness.aggregate import ALL, FIRST_GRIP_COLUMNS, S4_FAMILIES, mean_se
-from awda_bench.harness.bootstrap_ci import outcomes, stratified_bootstrap_ci, stratified_mean
-from awda_bench.harness.results_index import (
+from awda_bench.reporting import paper_values
+from awda_bench.reporting.aggregate import ALL, FIRST_GRIP_COLUMNS, S4_FAMILIES, mean_se
+from awda_bench.reporting.bootstrap_ci import outcomes, stratified_bootstrap_ci, stratified_mean
+from awda_bench.reporting.results_index import (
     ANALYSIS_KEYS,
     LEARNED_KEYS,
     load_index,
     load_missing,
 )
-from awda_bench.harness.results_page import (
+from awda_bench.reporting.results_page import (
     CI,
     FIRST_GRIP,
     NO_RUN_YET,
@@ -512,7 +512,7 @@ def test_the_metaworld_rows_group_the_held_out_tasks_by_their_published_difficul
 
 
 def test_sources_say_whether_todays_code_makes_their_protocol(reports: Path) -> None:
-    from awda_bench.harness.episode_specs import make_protocol
+    from awda_bench.evaluation.episode_specs import make_protocol
     from awda_bench.suites import load_suite
 
     today = make_protocol(load_suite("pick_place"), episodes=20, base_seed=0)
@@ -534,7 +534,7 @@ def test_sources_say_whether_todays_code_makes_their_protocol(reports: Path) -> 
 def test_the_committed_page_is_what_its_index_and_sources_make() -> None:
     """reports/RESULTS.md is generated, never typed: regenerating it from the committed index and
     report directories (and today's suite files, which its protocol column checks) gives it back."""
-    from awda_bench.harness.results_page import DEFAULT_INDEX
+    from awda_bench.reporting.results_page import DEFAULT_INDEX
 
     root = Path(__file__).resolve().parent.parent
     index = root / DEFAULT_INDEX

@@ -7,10 +7,10 @@ import pytest
 from harness_fakes import write_fake_suite
 
 from awda_bench.errors import CorruptFileError, ProtocolMismatchError, UsageError
-from awda_bench.harness.episode_record import EpisodeRecord
-from awda_bench.harness.episode_specs import make_protocol
-from awda_bench.harness.methods import BUILTIN_SNAPSHOT, SnapshotRef
-from awda_bench.harness.results_store import STORE_NAME, ResultsStore
+from awda_bench.evaluation.episode_record import EpisodeRecord
+from awda_bench.evaluation.episode_specs import make_protocol
+from awda_bench.evaluation.methods import BUILTIN_SNAPSHOT, SnapshotRef
+from awda_bench.evaluation.results_store import STORE_NAME, ResultsStore
 from awda_bench.suites import load_suite
 
 SNAP = SnapshotRef(sha256=BUILTIN_SNAPSHOT, name=BUILTIN_SNAPSHOT, path=None, order=0)
@@ -103,7 +103,7 @@ def test_missing_and_foreign_files_are_one_line_errors(tmp_path: Path) -> None:
 def test_a_store_from_before_the_privileged_flag_and_first_grip_reads_and_gains_them(
     tmp_path: Path, protocol
 ) -> None:
-    from awda_bench.harness import results_store
+    from awda_bench.evaluation import results_store
 
     run_dir = tmp_path / "old"
     run_dir.mkdir()

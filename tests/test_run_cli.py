@@ -11,8 +11,8 @@ import pytest
 from harness_fakes import write_snapshots
 
 from awda_bench.cli import main
-from awda_bench.harness.methods import MethodSpec, register_method, unregister_method
-from awda_bench.harness.results_store import STORE_NAME
+from awda_bench.evaluation.methods import MethodSpec, register_method, unregister_method
+from awda_bench.evaluation.results_store import STORE_NAME
 
 TESTS = Path(__file__).resolve().parent
 FAKES = "harness_fakes"
@@ -213,7 +213,7 @@ def test_num_waypoints_selects_the_gt_waypoints_variant(tmp_path: Path, capsys) 
     import argparse
 
     from awda_bench.commands.run import add_parser, config_from_args
-    from awda_bench.harness.methods import get_method
+    from awda_bench.evaluation.methods import get_method
     from awda_bench.policies.gt_waypoints import gt_waypoints_k3, gt_waypoints_k8
 
     parser = argparse.ArgumentParser()
@@ -316,7 +316,7 @@ def test_grasp_select_centre_folds_into_the_centre_methods(tmp_path: Path, capsy
     import argparse
 
     from awda_bench.commands.run import add_parser, config_from_args
-    from awda_bench.harness.methods import get_method
+    from awda_bench.evaluation.methods import get_method
     from awda_bench.policies.gt_waypoints import GTWaypointsPolicy, gt_waypoints_centre
 
     parser = argparse.ArgumentParser()

@@ -22,7 +22,7 @@ from awda_bench.cli import main
 from awda_bench.commands.serve import build_server
 from awda_bench.episode import EpisodeContext, EpisodeSpec, Proprioception, WristDepth
 from awda_bench.errors import RemotePolicyError, UsageError
-from awda_bench.harness.methods import (
+from awda_bench.evaluation.methods import (
     MethodSpec,
     get_method,
     register_method,
@@ -30,8 +30,8 @@ from awda_bench.harness.methods import (
     served_method,
     unregister_method,
 )
-from awda_bench.harness.results_store import STORE_NAME, ResultsStore
-from awda_bench.harness.sweep import SweepConfig, run_sweep
+from awda_bench.evaluation.results_store import STORE_NAME, ResultsStore
+from awda_bench.evaluation.sweep import SweepConfig, run_sweep
 from awda_bench.policies.random_policy import RandomPolicy
 from awda_bench.serving.protocol import ServerInfo
 from awda_bench.serving.remote_policy import RemotePolicy, ServedMethod

@@ -5,10 +5,10 @@ import pytest
 from harness_fakes import write_fake_suite, write_snapshots
 
 from awda_bench.errors import CorruptFileError, UsageError
-from awda_bench.harness.job_pool import WorkerStartError
-from awda_bench.harness.methods import MethodSpec, register_method, unregister_method
-from awda_bench.harness.results_store import STORE_NAME, ResultsStore
-from awda_bench.harness.sweep import SweepConfig, run_sweep
+from awda_bench.evaluation.methods import MethodSpec, register_method, unregister_method
+from awda_bench.evaluation.results_store import STORE_NAME, ResultsStore
+from awda_bench.evaluation.sweep import SweepConfig, run_sweep
+from awda_bench.execution.job_pool import WorkerStartError
 
 FAKES = "harness_fakes"
 METHODS = {

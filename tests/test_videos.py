@@ -3,8 +3,8 @@ from pathlib import Path
 import cv2
 from harness_fakes import write_fake_suite
 
-from awda_bench.harness.sweep import SweepConfig, run_sweep
-from awda_bench.harness.videos import choose_episodes, record_videos
+from awda_bench.evaluation.sweep import SweepConfig, run_sweep
+from awda_bench.reporting.videos import choose_episodes, record_videos
 
 
 def test_choose_first_k_successes_and_failures_per_task() -> None:

@@ -46,17 +46,17 @@ def _frames(env: Any) -> int:
 def _demo_frames() -> int:
     """Frames rendered so far by this process's demonstrator envs (the harness's, shared by every
     observation-only policy)."""
-    from awda_bench.harness.observations import DEMO_ENVS
+    from awda_bench.evaluation.observations import DEMO_ENVS
 
     return sum(_frames(e.unwrapped) for e in DEMO_ENVS.values())
 
 
 def measure(suite_name: str, method: str, checkpoints: Path | None, episodes: int) -> dict:
     from awda_bench.demo_recording import clear_demo_video_cache
-    from awda_bench.harness.env_factory import make_env
-    from awda_bench.harness.episode_runner import run_episode
-    from awda_bench.harness.episode_specs import build_episode_specs, make_protocol
-    from awda_bench.harness.methods import get_method, make_policy, select_snapshots
+    from awda_bench.evaluation.env_factory import make_env
+    from awda_bench.evaluation.episode_runner import run_episode
+    from awda_bench.evaluation.episode_specs import build_episode_specs, make_protocol
+    from awda_bench.evaluation.methods import get_method, make_policy, select_snapshots
     from awda_bench.suites import load_suite
 
     suite = load_suite(suite_name)

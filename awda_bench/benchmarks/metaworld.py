@@ -21,7 +21,7 @@ import subprocess
 import sys
 import time
 
-from awda_bench.harness.interpreter_process import child_environment
+from awda_bench.execution.interpreter_process import child_environment
 from awda_bench.metaworld_tasks import ALL_TASKS
 from awda_bench.runtimes import worker_python
 

@@ -50,7 +50,7 @@ def _percentiles(values: np.ndarray) -> str:
 
 
 def _make_env(suite: Any) -> Any:
-    from awda_bench.harness.env_factory import make_env
+    from awda_bench.evaluation.env_factory import make_env
 
     return make_env(suite)
 

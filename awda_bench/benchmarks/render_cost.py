@@ -186,7 +186,7 @@ def run_render_cost_bench(args: argparse.Namespace) -> int:
     import torch
 
     from awda_bench.demo_recording import make_demo_env
-    from awda_bench.harness.episode_runner import fresh_scene_options
+    from awda_bench.evaluation.episode_runner import fresh_scene_options
     from awda_bench.robot.cameras import THIRD_PERSON_CAMERA, camera_sensor, capture_rgb
     from awda_bench.suites import load_suite
 

@@ -35,9 +35,9 @@ import numpy as np
 
 from awda_bench.benchmarks.throughput import episode_outcomes
 from awda_bench.episode import EpisodeContext, EpisodeSpec
-from awda_bench.harness.methods import served_method
-from awda_bench.harness.results_store import STORE_NAME
-from awda_bench.harness.sweep import SweepConfig, SweepResult, run_sweep
+from awda_bench.evaluation.methods import served_method
+from awda_bench.evaluation.results_store import STORE_NAME
+from awda_bench.evaluation.sweep import SweepConfig, SweepResult, run_sweep
 from awda_bench.serving.remote_policy import RemotePolicy
 from awda_bench.suites import SUITES_DIR
 

@@ -24,11 +24,11 @@ import tempfile
 from pathlib import Path
 
 from awda_bench.benchmarks.core_scaling import measure_core_scaling
-from awda_bench.harness.backends import BACKENDS
-from awda_bench.harness.methods import DEFAULT_METHOD
-from awda_bench.harness.results_store import STORE_NAME
-from awda_bench.harness.sweep import SweepConfig, SweepResult, run_sweep
-from awda_bench.harness.worker_pool import DEFAULT_ENV_FACTORY
+from awda_bench.evaluation.methods import DEFAULT_METHOD
+from awda_bench.evaluation.results_store import STORE_NAME
+from awda_bench.evaluation.sweep import SweepConfig, SweepResult, run_sweep
+from awda_bench.evaluation.worker_pool import DEFAULT_ENV_FACTORY
+from awda_bench.execution.backends import BACKENDS
 from awda_bench.suites import SUITES_DIR
 
 

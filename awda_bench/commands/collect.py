@@ -12,7 +12,7 @@ from awda_bench.data.config import (
     CollectConfig,
     parse_image_size,
 )
-from awda_bench.harness.backends import add_backend_args
+from awda_bench.execution.backends import add_backend_args
 from awda_bench.suites import SUITES_DIR
 
 QUICK_EPISODES = 2

@@ -57,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     from awda_bench.errors import UsageError
 
     if args.dataset_command == "fig-s6":
-        from awda_bench.data.synthesis_figure import fig_s6
+        from awda_bench.reporting.synthesis_figure import fig_s6
 
         data = CollectedData(args.data_dir)
         try:

@@ -55,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     npz = video.with_suffix(".npz")
     trajectory.save(npz)
     if args.figure is not None:
-        from awda_bench.harness.figures import scene_figure, write_png
+        from awda_bench.reporting.figures import scene_figure, write_png
 
         write_png(scene_figure(frames[0], frames[len(frames) // 2]), args.figure)
         print(f"{args.figure}: first frame | frame {len(frames) // 2} of {len(frames)}")

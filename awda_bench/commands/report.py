@@ -7,9 +7,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from awda_bench.harness.aggregate import DEFAULT_METRIC, METRICS
-from awda_bench.harness.report import write_report
-from awda_bench.harness.results_page import DEFAULT_INDEX, write_results_page
+from awda_bench.reporting.aggregate import DEFAULT_METRIC, METRICS
+from awda_bench.reporting.report import write_report
+from awda_bench.reporting.results_page import DEFAULT_INDEX, write_results_page
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:

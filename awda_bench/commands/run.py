@@ -7,12 +7,12 @@ import sys
 from pathlib import Path
 
 from awda_bench.errors import UsageError
-from awda_bench.harness.backends import add_backend_args
-from awda_bench.harness.episode_specs import EVAL_SPLITS
-from awda_bench.harness.methods import DEFAULT_METHOD, REMOTE_METHOD, method_names
-from awda_bench.harness.results_store import STORE_NAME
-from awda_bench.harness.sweep import SweepConfig, run_sweep
-from awda_bench.harness.worker_pool import DEFAULT_ENV_FACTORY
+from awda_bench.evaluation.episode_specs import EVAL_SPLITS
+from awda_bench.evaluation.methods import DEFAULT_METHOD, REMOTE_METHOD, method_names
+from awda_bench.evaluation.results_store import STORE_NAME
+from awda_bench.evaluation.sweep import SweepConfig, run_sweep
+from awda_bench.evaluation.worker_pool import DEFAULT_ENV_FACTORY
+from awda_bench.execution.backends import add_backend_args
 from awda_bench.policies.tosvi_policy import ACTION_SELECTS, tosvi_method_name
 from awda_bench.primitives.config import CENTRE_SUFFIX, GRASP_SELECTS
 from awda_bench.serving.remote_policy import DEFAULT_TIMEOUT_S
@@ -211,7 +211,7 @@ def run(args: argparse.Namespace) -> int:
         f"store {config.out / STORE_NAME}"
     )
     if args.videos:
-        from awda_bench.harness.videos import record_videos
+        from awda_bench.reporting.videos import record_videos
 
         written = record_videos(config, args.videos)
         print(f"videos: {len(written)} files under {config.out / 'videos'}")

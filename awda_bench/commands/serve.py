@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from awda_bench.errors import UsageError
-from awda_bench.harness.methods import (
+from awda_bench.evaluation.methods import (
     MethodSpec,
     SnapshotRef,
     get_method,

@@ -175,7 +175,7 @@ class CollectConfig:
             raise UsageError("nothing to collect: give --episodes-per-task > 0 or --synthesize > 0")
         if self.workers < 0:
             raise UsageError(f"--workers must be >= 0, got {self.workers}")
-        from awda_bench.harness.backends import check_backend
+        from awda_bench.execution.backends import check_backend
 
         check_backend(self.backend, self.workers, self.ray_address)
         if self.seed < 0:

@@ -2,7 +2,7 @@
 
 A *unit* is ``(role, task)``; it must end with ``planned`` successful episodes. Attempt ``i`` of a
 unit has a seed hashed from ``(suite, base seed, task, i, "collect-<split>-<role>")``
-(:func:`awda_bench.harness.episode_specs.derive_seed`), never drawn from a shared generator.
+(:func:`awda_bench.episode.derive_seed`), never drawn from a shared generator.
 Evaluation hashes the roles ``agent``/``demo``, so collected scenes are independent of evaluated
 ones.
 
@@ -34,8 +34,8 @@ from importlib import metadata
 from pathlib import Path
 
 from awda_bench.data.config import ROLE_SYNTHESIZED, CollectConfig
+from awda_bench.episode import derive_seed
 from awda_bench.errors import UsageError
-from awda_bench.harness.episode_specs import derive_seed
 from awda_bench.metaworld_tasks import check_task_names
 from awda_bench.runtimes import check_local_workers
 from awda_bench.suites import Suite, TaskDef, load_suite

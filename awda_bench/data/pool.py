@@ -1,7 +1,7 @@
 """Collection workers: processes that each build their recorder once and record jobs as they come.
 
 What a worker holds is a :class:`RecorderExecutor`; :class:`ProcessRunner` runs it on the local
-process pool the evaluation uses too (:mod:`awda_bench.harness.process_pool`): jobs in, results
+process pool the evaluation uses too (:mod:`awda_bench.execution.process_pool`): jobs in, results
 out, so another backend (Ray, :mod:`awda_bench.data.ray_runner`) implements :class:`JobRunner` the
 same way::
 
@@ -16,10 +16,10 @@ same way::
       None ------------------------------->   close envs, exit
 
 Workers of a Meta-World suite start from ``.venv-metaworld``'s interpreter
-(:mod:`awda_bench.harness.interpreter_process`) and hold a
+(:mod:`awda_bench.execution.interpreter_process`) and hold a
 :class:`~awda_bench.data.metaworld_recorder.MetaWorldRecorder`; the conversation is the same.
 A worker that cannot build its recorder stops the collection
-(:class:`~awda_bench.harness.job_pool.WorkerStartError`).
+(:class:`~awda_bench.execution.job_pool.WorkerStartError`).
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from typing import Any, Protocol
 from awda_bench.data.config import CollectConfig
 from awda_bench.data.plan import Attempt, CollectJob, make_attempt
 from awda_bench.data.recorder import EpisodeData, EpisodeRecorder
-from awda_bench.harness.process_pool import ProcessPool
+from awda_bench.execution.process_pool import ProcessPool
 from awda_bench.runtimes import worker_python
 from awda_bench.suites import Suite, load_suite
 

@@ -1,5 +1,5 @@
 """``collect --backend ray``: the collection's :class:`~awda_bench.data.pool.JobRunner` on Ray
-actors (:class:`~awda_bench.harness.ray_pool.RayActorPool`), each holding a
+actors (:class:`~awda_bench.execution.ray_pool.RayActorPool`), each holding a
 :class:`~awda_bench.data.pool.RecorderExecutor` exactly like a local collect worker.
 
 Meta-World's actors start from ``.venv-metaworld``'s interpreter (:mod:`awda_bench.runtimes`).
@@ -12,7 +12,7 @@ from __future__ import annotations
 from awda_bench.data.config import CollectConfig
 from awda_bench.data.plan import CollectJob
 from awda_bench.data.pool import JobResult, RecorderExecutor, lost_job_result
-from awda_bench.harness.ray_pool import RayActorPool
+from awda_bench.execution.ray_pool import RayActorPool
 from awda_bench.runtimes import worker_python
 from awda_bench.suites import load_suite
 

@@ -1,4 +1,4 @@
-"""The evaluation harness: suite -> seeded episode specs -> workers -> records -> store -> report.
+"""The evaluation: suite -> seeded episode specs -> workers -> records -> store.
 
 Each arrow is one module:
 
@@ -8,11 +8,11 @@ Each arrow is one module:
   :mod:`awda_bench.serving`);
 - :mod:`.env_factory` builds the one env a worker reuses;
 - :mod:`.episode_runner` plays one episode into an :class:`.episode_record.EpisodeRecord`;
-- :mod:`.worker_pool` runs episodes in processes with a watchdog (:mod:`.job_pool` is what every
-  pool shares, :mod:`.process_pool` the local pool ``collect`` uses too, :mod:`.worker_loop` its
-  workers' side, :mod:`.interpreter_process` a worker started from another environment's
-  interpreter (Meta-World), :mod:`.ray_pool` the same on Ray actors; :mod:`.backends` picks one);
+- :mod:`.worker_pool` runs episodes in processes with a watchdog, on the local pool that
+  ``collect`` uses too (:mod:`awda_bench.execution`); :mod:`.episode_pools` picks the pool of a
+  backend (local processes, or Ray actors);
 - :mod:`.results_store` keeps one SQLite row per episode, keyed for resume;
-- :mod:`.sweep` ties them together for ``python -m awda_bench run``;
-- :mod:`.aggregate`, :mod:`.tables`, :mod:`.figures`, :mod:`.report` turn the rows into tables.
+- :mod:`.sweep` ties them together for ``python -m awda_bench run``.
+
+The rows become tables, figures and the results page in :mod:`awda_bench.reporting`.
 """

@@ -40,8 +40,8 @@ from awda_bench.episode import (
     is_privileged,
     seed_globals,
 )
-from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
-from awda_bench.harness.observations import SimObservations
+from awda_bench.evaluation.episode_record import STATUS_OK, EpisodeRecord
+from awda_bench.evaluation.observations import SimObservations
 from awda_bench.suites import Suite
 
 FrameHook = Callable[[Any], None]

@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from awda_bench.episode import EpisodeSpec
+from awda_bench.episode import EpisodeSpec, derive_seed
 from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.suites import SUITES_DIR, Suite, load_suite
 
@@ -26,7 +26,7 @@ PROTOCOL_VERSION = 2
 """Bumped whenever the harness changes how an episode is played or judged.
 
 2: every episode, and every demo it shows, starts in a rebuilt scene (no PhysX history from the
-worker's earlier episodes; see :mod:`awda_bench.harness.episode_runner`)."""
+worker's earlier episodes; see :mod:`awda_bench.evaluation.episode_runner`)."""
 
 EPISODE_UNITS = ("task", "family")
 """How ``episodes`` is counted: per held-out task, or per family with variations cycled."""
@@ -127,12 +127,6 @@ def protocol_drift(stored: Mapping[str, Any], suites_dir: Path = SUITES_DIR) -> 
     if recorded.protocol_version != PROTOCOL_VERSION:
         drift.append(f"protocol v{recorded.protocol_version}, today v{PROTOCOL_VERSION}")
     return drift
-
-
-def derive_seed(suite: str, base_seed: int, task: int, episode: int, role: str) -> int:
-    """A seed in ``[0, 2**31)`` from a hash of the episode's identity and ``role`` (agent/demo)."""
-    key = f"{suite}|{base_seed}|{task}|{episode}|{role}".encode()
-    return int.from_bytes(hashlib.sha256(key).digest()[:4], "little") & 0x7FFF_FFFF
 
 
 def build_episode_specs(suite: Suite, protocol: EvalProtocol) -> list[EpisodeSpec]:

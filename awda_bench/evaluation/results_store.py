@@ -35,9 +35,9 @@ from typing import Any
 import pandas as pd
 
 from awda_bench.errors import CorruptFileError, ProtocolMismatchError, StorageError, UsageError
-from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
-from awda_bench.harness.episode_specs import EvalProtocol
-from awda_bench.harness.methods import SnapshotRef
+from awda_bench.evaluation.episode_record import STATUS_OK, EpisodeRecord
+from awda_bench.evaluation.episode_specs import EvalProtocol
+from awda_bench.evaluation.methods import SnapshotRef
 
 STORE_NAME = "results.sqlite"
 """File name of the store inside a run directory."""

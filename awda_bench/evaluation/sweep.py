@@ -9,21 +9,19 @@ Order of work, so that bad input never touches the store::
 
 from __future__ import annotations
 
-import platform
 import sys
 import time
 from contextlib import AbstractContextManager, nullcontext
 from dataclasses import dataclass, field, replace
-from importlib import metadata
 from pathlib import Path
 
 from tqdm import tqdm
 
 from awda_bench.errors import UsageError
-from awda_bench.harness.backends import BACKENDS, EpisodePool, check_backend, open_pool
-from awda_bench.harness.episode_record import STATUS_OK, EpisodeRecord
-from awda_bench.harness.episode_specs import EvalProtocol, build_episode_specs, make_protocol
-from awda_bench.harness.methods import (
+from awda_bench.evaluation.episode_pools import EpisodePool, open_pool
+from awda_bench.evaluation.episode_record import STATUS_OK, EpisodeRecord
+from awda_bench.evaluation.episode_specs import EvalProtocol, build_episode_specs, make_protocol
+from awda_bench.evaluation.methods import (
     REMOTE_METHOD,
     MethodSpec,
     SnapshotRef,
@@ -32,39 +30,23 @@ from awda_bench.harness.methods import (
     select_snapshots,
     served_method,
 )
-from awda_bench.harness.results_store import ResultsStore
-from awda_bench.harness.worker_pool import (
+from awda_bench.evaluation.results_store import ResultsStore
+from awda_bench.evaluation.worker_pool import (
     DEFAULT_ENV_FACTORY,
     Job,
     WorkerConfig,
     run_inline,
 )
+from awda_bench.execution.backends import BACKENDS, check_backend
 from awda_bench.metaworld_tasks import check_task_names
-from awda_bench.runtimes import check_local_workers, worker_python, worker_versions
+from awda_bench.runtimes import (
+    check_local_workers,
+    software_versions,
+    worker_python,
+    worker_versions,
+)
 from awda_bench.serving.remote_policy import DEFAULT_TIMEOUT_S
 from awda_bench.suites import SIMULATORS, SUITES_DIR, Suite, load_suite
-
-VERSIONED_PACKAGES = (
-    "awda_bench",
-    "mani-skill",
-    "sapien",
-    "mink",
-    "mujoco",
-    "gymnasium",
-    "torch",
-    "numpy",
-)
-"""Packages whose versions are recorded with every run and printed in the report header."""
-
-
-def software_versions() -> dict[str, str]:
-    versions = {"python": platform.python_version()}
-    for name in VERSIONED_PACKAGES:
-        try:
-            versions[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            versions[name] = "not installed"
-    return versions
 
 
 @dataclass(frozen=True)
@@ -88,7 +70,7 @@ class SweepConfig:
     workers: int = 1
     """Worker processes or Ray actors (0: play in this process, no watchdog; local backend only)."""
     backend: str = BACKENDS[0]
-    """Where workers run: ``"local"`` processes or ``"ray"`` actors (see :mod:`.backends`)."""
+    """Where workers run: ``"local"`` processes or ``"ray"`` actors (see :mod:`awda_bench.execution.backends`)."""
     ray_address: str | None = None
     """Ray cluster to join (``--backend ray``); ``None`` starts a private local Ray instance."""
     tasks: tuple[int, ...] = ()

@@ -1,7 +1,7 @@
 """Episode workers: processes that each build one env, reuse it, and stream records back.
 
 What a worker holds is an :class:`EpisodeExecutor`; :class:`WorkerPool` runs it on the local
-process pool (:mod:`awda_bench.harness.process_pool`, shared with ``collect``)::
+process pool (:mod:`awda_bench.execution.process_pool`, shared with ``collect``)::
 
     parent                                   worker k (spawned, or started from the suite's own
                                              environment, see awda_bench.runtimes; OMP_NUM_THREADS=1)
@@ -14,7 +14,7 @@ process pool (:mod:`awda_bench.harness.process_pool`, shared with ``collect``)::
 
 An exception inside an episode becomes an error record and the worker carries on; a worker that
 dies or hangs is replaced and its episode recorded as an error; a worker that cannot even build
-its env stops the sweep (:class:`~awda_bench.harness.job_pool.WorkerStartError`), because
+its env stops the sweep (:class:`~awda_bench.execution.job_pool.WorkerStartError`), because
 every episode would fail the same way.
 """
 
@@ -29,14 +29,14 @@ from pathlib import Path
 from typing import Any
 
 from awda_bench.episode import EpisodeSpec, Policy
-from awda_bench.harness.episode_record import STATUS_ERROR, EpisodeRecord
-from awda_bench.harness.episode_runner import FrameHook, run_episode
-from awda_bench.harness.methods import MethodSpec, SnapshotRef, make_policy, resolve
-from awda_bench.harness.process_pool import ProcessPool
+from awda_bench.evaluation.episode_record import STATUS_ERROR, EpisodeRecord
+from awda_bench.evaluation.episode_runner import FrameHook, run_episode
+from awda_bench.evaluation.methods import MethodSpec, SnapshotRef, make_policy, resolve
+from awda_bench.execution.process_pool import ProcessPool
 from awda_bench.runtimes import worker_python
 from awda_bench.suites import Suite, load_suite
 
-DEFAULT_ENV_FACTORY = "awda_bench.harness.env_factory:make_env"
+DEFAULT_ENV_FACTORY = "awda_bench.evaluation.env_factory:make_env"
 """``"module:attribute"`` of ``make_env(suite, render_mode=...)``."""
 
 

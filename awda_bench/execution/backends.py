@@ -1,30 +1,26 @@
-"""Execution backends: where a sweep's episodes are played. One place to pick one, for every
-command that schedules episodes.
+"""Execution backends: where a command's jobs are played (``run``: episodes, ``collect``:
+recordings). One place to pick one, for every command that schedules jobs.
 
-========  ==============================================  =====================================
+========  ==============================================  =========================================
 backend   workers                                         pool
-========  ==============================================  =====================================
-local     ``--workers`` processes on this machine         :class:`~.worker_pool.WorkerPool`
-ray       ``--workers`` Ray actors: a private local Ray   :class:`~.ray_pool.RayWorkerPool`
+========  ==============================================  =========================================
+local     ``--workers`` processes on this machine         :class:`~.process_pool.ProcessPool`
+ray       ``--workers`` Ray actors: a private local Ray   :class:`~.ray_pool.RayActorPool`
           instance, or a cluster (``--ray-address``)
-========  ==============================================  =====================================
+========  ==============================================  =========================================
 
 Both take the same pre-seeded jobs and call ``on_result`` on the driver once per job, so the
-single store writer, resume, de-duplication, error records and the watchdog mean the same.
+single store writer, resume, de-duplication, error records and the watchdog mean the same. The
+evaluation's pools on each: :mod:`awda_bench.evaluation.episode_pools`; the collection's:
+:mod:`awda_bench.data.pool`, :mod:`awda_bench.data.ray_runner`.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
-from typing import Protocol
 
 from awda_bench.errors import UnknownChoiceError, UsageError
-from awda_bench.harness.episode_record import EpisodeRecord
-from awda_bench.harness.worker_pool import Job, WorkerConfig, WorkerPool
-from awda_bench.suites import Suite
 
 BACKENDS = ("local", "ray")
 """Valid ``--backend`` values; the first is the default."""
@@ -56,19 +52,6 @@ def add_backend_args(parser: argparse.ArgumentParser) -> None:
     )
 
 
-class EpisodePool(Protocol):
-    """What a backend's pool offers a sweep."""
-
-    respawns: int
-    """Workers replaced after a hang or crash."""
-    startup_s: float
-    """Time until every first worker had built its env [s]."""
-
-    def run(self, jobs: Sequence[Job], on_result: Callable[[EpisodeRecord], None]) -> None:
-        """Play every job; call ``on_result`` once per job on the calling thread."""
-        ...
-
-
 def check_backend(backend: str, workers: int, ray_address: str | None) -> None:
     """Refuse a bad backend choice with one line (before anything is started or written)."""
     if backend not in BACKENDS:
@@ -76,29 +59,8 @@ def check_backend(backend: str, workers: int, ray_address: str | None) -> None:
     if ray_address is not None and backend != "ray":
         raise UsageError("--ray-address needs --backend ray")
     if backend == "ray":
-        from awda_bench.harness.ray_pool import require_ray
+        from awda_bench.execution.ray_pool import require_ray
 
         if workers < 1:
             raise UsageError(f"--backend ray needs --workers >= 1 (got {workers})")
         require_ray()
-
-
-@contextmanager
-def open_pool(
-    backend: str,
-    config: WorkerConfig,
-    workers: int,
-    suite: Suite,
-    *,
-    ray_address: str | None = None,
-) -> Iterator[EpisodePool]:
-    """The pool of ``backend``, ready to :meth:`~EpisodePool.run`; the Ray backend starts (or
-    joins) Ray here and shuts a Ray instance it started down on exit."""
-    check_backend(backend, workers, ray_address)
-    if backend == "local":
-        yield WorkerPool(config, workers, suite)
-        return
-    from awda_bench.harness.ray_pool import RayWorkerPool
-
-    with RayWorkerPool(config, workers, suite, address=ray_address) as pool:
-        yield pool

@@ -1,9 +1,9 @@
 """A pool worker started from another interpreter (another virtual environment's ``bin/python``),
-speaking the same conversation as a spawned one (:mod:`awda_bench.harness.worker_loop`).
+speaking the same conversation as a spawned one (:mod:`awda_bench.execution.worker_loop`).
 
 ``multiprocessing``'s spawn cannot do this: its child takes the parent's ``sys.path`` and would
 import the parent environment's packages (mujoco 4 instead of Meta-World's 3.3). So the parent
-makes a socket pair, starts ``python -m awda_bench.harness.interpreter_process FD`` with one end
+makes a socket pair, starts ``python -m awda_bench.execution.interpreter_process FD`` with one end
 (and this checkout on ``PYTHONPATH``, so both sides run the same code), wraps its own end as a
 ``multiprocessing`` :class:`~multiprocessing.connection.Connection` (the pool waits on it like on a
 pipe), and sends ``(build, config)`` first::
@@ -27,7 +27,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Any
 
-from awda_bench.harness.job_pool import THREAD_VARS, Executor
+from awda_bench.execution.job_pool import THREAD_VARS, Executor
 
 CODE_ROOT = str(Path(__file__).resolve().parents[2])
 """The directory holding this ``awda_bench`` package: the child's first ``PYTHONPATH`` entry."""
@@ -96,8 +96,8 @@ def start_in_interpreter(
 
 def main(argv: list[str]) -> None:
     """The child: take the connection on file descriptor ``argv[0]``, then serve jobs."""
-    from awda_bench.harness.parent_death import die_with_parent
-    from awda_bench.harness.worker_loop import serve_jobs
+    from awda_bench.execution.parent_death import die_with_parent
+    from awda_bench.execution.worker_loop import serve_jobs
 
     die_with_parent(signal.SIGKILL)  # before the executor's (slow) imports
     conn = Connection(int(argv[0]))

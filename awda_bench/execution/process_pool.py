@@ -1,8 +1,8 @@
 """Local workers: spawned processes that each build what they hold once, then play jobs one at a
 time and stream results back. The one process pool behind ``run`` (episodes,
-:class:`~awda_bench.harness.worker_pool.WorkerPool`) and ``collect`` (recording jobs,
-:class:`~awda_bench.data.pool.ProcessRunner`); :class:`~awda_bench.harness.ray_pool.RayActorPool`
-is the same :class:`~awda_bench.harness.job_pool.JobPool` on Ray actors.
+:class:`~awda_bench.evaluation.worker_pool.WorkerPool`) and ``collect`` (recording jobs,
+:class:`~awda_bench.data.pool.ProcessRunner`); :class:`~awda_bench.execution.ray_pool.RayActorPool`
+is the same :class:`~awda_bench.execution.job_pool.JobPool` on Ray actors.
 
 ::
 
@@ -19,12 +19,12 @@ is the same :class:`~awda_bench.harness.job_pool.JobPool` on Ray actors.
 
 Workers are spawned from this interpreter, or, when :attr:`ProcessPool.python` names another
 (a suite whose simulator needs an environment of its own, :mod:`awda_bench.runtimes`), started
-from that one (:mod:`awda_bench.harness.interpreter_process`); the conversation
-(:mod:`awda_bench.harness.worker_loop`) is the same.
+from that one (:mod:`awda_bench.execution.interpreter_process`); the conversation
+(:mod:`awda_bench.execution.worker_loop`) is the same.
 
 A worker that dies mid-job is replaced and the job ends as ``lost(job, ...)``; a worker that
 cannot build its executor, or does not within ``start_timeout_s``, stops the run
-(:class:`~awda_bench.harness.job_pool.WorkerStartError`).
+(:class:`~awda_bench.execution.job_pool.WorkerStartError`).
 """
 
 from __future__ import annotations
@@ -38,9 +38,9 @@ from contextlib import contextmanager
 from multiprocessing.connection import Connection, wait
 from typing import Any, ClassVar
 
-from awda_bench.harness.interpreter_process import start_in_interpreter
-from awda_bench.harness.job_pool import THREAD_VARS, Executor, J, JobPool, R, WorkerStartError
-from awda_bench.harness.worker_loop import serve_jobs
+from awda_bench.execution.interpreter_process import start_in_interpreter
+from awda_bench.execution.job_pool import THREAD_VARS, Executor, J, JobPool, R, WorkerStartError
+from awda_bench.execution.worker_loop import serve_jobs
 
 
 @contextmanager
@@ -77,7 +77,7 @@ class _Slot:
         self.conn = conn
         self.process: Any = process
         """A ``multiprocessing`` process, or an
-        :class:`~awda_bench.harness.interpreter_process.InterpreterProcess` (the same methods)."""
+        :class:`~awda_bench.execution.interpreter_process.InterpreterProcess` (the same methods)."""
         self.ready = False
         self.job: Any = None
         self.since = time.monotonic()
@@ -92,7 +92,7 @@ class _Slot:
 class ProcessPool(JobPool[J, R]):
     """Run jobs on ``workers`` spawned processes, each holding ``build(config)`` (a picklable
     executor class or factory); ``on_result`` gets one result per job in the parent, in arrival
-    order, and may return follow-up jobs (see :class:`~awda_bench.harness.job_pool.JobPool`).
+    order, and may return follow-up jobs (see :class:`~awda_bench.execution.job_pool.JobPool`).
     :attr:`startup_s` runs from the start of :meth:`run`.
     """
 

@@ -1,6 +1,7 @@
-"""Workers as Ray actors: the local pool's interface (:mod:`awda_bench.harness.process_pool`: jobs
-in, results streamed to a callback on the driver) on one machine or a cluster.
-:class:`RayActorPool` schedules any job type; :class:`RayWorkerPool` is the evaluation pool
+"""Workers as Ray actors: the local pool's interface (:mod:`awda_bench.execution.process_pool`:
+jobs in, results streamed to a callback on the driver) on one machine or a cluster.
+:class:`RayActorPool` schedules any job type;
+:class:`~awda_bench.evaluation.episode_pools.RayWorkerPool` is the evaluation pool
 (``run --backend ray``), and :mod:`awda_bench.data.ray_runner` the collection one
 (``collect --backend ray``).
 
@@ -30,7 +31,7 @@ Differences from the local pool, and why:
   actor is killed before its job is queued again or given up.
 - An actor that Ray cannot place (a cluster with fewer free CPUs than ``workers``) waits, and one
   that dies while starting is replaced if another actor has started; the run stops with
-  :class:`~awda_bench.harness.job_pool.WorkerStartError` when an actor reports that it cannot
+  :class:`~awda_bench.execution.job_pool.WorkerStartError` when an actor reports that it cannot
   build its envs, or when *no* actor has started (within ``start_timeout_s``, or at all).
 
 Ray is an optional extra (``pip install -e '.[ray]'``); without it :func:`require_ray` raises a
@@ -52,12 +53,9 @@ from types import ModuleType
 from typing import Any
 
 from awda_bench.errors import MissingExtraError, UsageError
-from awda_bench.harness.episode_record import EpisodeRecord
-from awda_bench.harness.interpreter_process import CODE_ROOT, child_pythonpath
-from awda_bench.harness.job_pool import THREAD_VARS, Executor, J, JobPool, R, WorkerStartError
-from awda_bench.harness.worker_pool import EpisodeExecutor, Job, WorkerConfig, pool_settings
-from awda_bench.runtimes import check_worker_ray, worker_python
-from awda_bench.suites import Suite
+from awda_bench.execution.interpreter_process import CODE_ROOT, child_pythonpath
+from awda_bench.execution.job_pool import THREAD_VARS, Executor, J, JobPool, R, WorkerStartError
+from awda_bench.runtimes import check_worker_ray
 
 RAY_INSTALL_HINT = "pip install -e '.[ray]'"
 """How to install the extra (printed when Ray is missing)."""
@@ -115,7 +113,7 @@ def require_ray() -> ModuleType:
 def interpreter_runtime_env(python: str) -> dict[str, Any]:
     """Ray's per-actor runtime environment for actors started from ``python`` (another virtual
     environment's interpreter): that executable, this checkout first on ``PYTHONPATH`` and one
-    thread per BLAS/OpenMP pool, as :func:`~awda_bench.harness.interpreter_process.child_environment`
+    thread per BLAS/OpenMP pool, as :func:`~awda_bench.execution.interpreter_process.child_environment`
     gives a local worker started from it."""
     env_vars = {name: "1" for name in THREAD_VARS}
     env_vars["PYTHONPATH"] = child_pythonpath()
@@ -178,14 +176,14 @@ class _Slot:
 
 class RayActorPool(JobPool[J, R]):
     """Run jobs on ``workers`` Ray actors, each holding ``build(config)``; ``on_result`` gets one
-    result per job on the driver, in arrival order (see :class:`~awda_bench.harness.job_pool.JobPool`).
+    result per job on the driver, in arrival order (see :class:`~awda_bench.execution.job_pool.JobPool`).
 
     ``lost(job, message, elapsed_s)`` makes the error result of a job the watchdog ended or whose
     workers kept dying. ``address=None`` starts a private local Ray instance
     (``ray.init(address="local")``, ``max(workers, cpu_count)`` CPUs); otherwise the pool joins the
     cluster at ``address`` (``"auto"``, ``"HOST:6379"``, ``"ray://HOST:10001"``). If Ray is
     already initialized in this process it is used as it is. A Ray instance the pool started is
-    shut down by :meth:`close`. ``settings``: :class:`~awda_bench.harness.job_pool.JobPool`'s
+    shut down by :meth:`close`. ``settings``: :class:`~awda_bench.execution.job_pool.JobPool`'s
     (``lost``, ``job_timeout_s``, ``start_timeout_s``).
     """
 
@@ -401,19 +399,3 @@ class RayActorPool(JobPool[J, R]):
             ray.wait(closing, num_returns=len(closing), timeout=CLOSE_TIMEOUT_S)
         for slot in slots:
             ray.kill(slot.handle, no_restart=True)
-
-
-class RayWorkerPool(RayActorPool[Job, EpisodeRecord]):
-    """The evaluation pool on Ray: actors hold an :class:`EpisodeExecutor` (one env per env id,
-    the policy cached per snapshot), exactly like a local worker; same interface as
-    :class:`~awda_bench.harness.worker_pool.WorkerPool`."""
-
-    def __init__(
-        self, config: WorkerConfig, workers: int, suite: Suite, *, address: str | None = None
-    ) -> None:
-        self.suite = suite
-        settings = pool_settings(config, suite)
-        python = worker_python(suite.simulator)  # Meta-World: its own environment's interpreter
-        super().__init__(
-            EpisodeExecutor, config, workers, address=address, python=python, **settings
-        )

@@ -1,5 +1,5 @@
 """A Meta-World suite's tasks behind the harness's env interface (what
-:func:`awda_bench.harness.episode_runner.run_episode` calls).
+:func:`awda_bench.evaluation.episode_runner.run_episode` calls).
 
 ::
 

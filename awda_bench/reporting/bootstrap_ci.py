@@ -1,7 +1,7 @@
 """A 95 % confidence interval for a success rate averaged over snapshots: a stratified bootstrap.
 
 A cell's statistic is the mean over its snapshots of each snapshot's success rate (as in
-:mod:`awda_bench.harness.aggregate`); for a cell averaged over task families too (Table S4's All),
+:mod:`awda_bench.reporting.aggregate`); for a cell averaged over task families too (Table S4's All),
 the mean over families of that. Each snapshot's episode outcomes (0/1) are one sample;
 :func:`scipy.stats.bootstrap` with ``paired=False`` resamples every sample on its own (with
 replacement, keeping its size), which is a bootstrap stratified by snapshot::

@@ -25,10 +25,10 @@ from pathlib import Path
 import pandas as pd
 
 from awda_bench.errors import UsageError
-from awda_bench.harness import aggregate, tables
-from awda_bench.harness.figures import plot_success_vs_snapshot
-from awda_bench.harness.results_store import ResultsStore
-from awda_bench.harness.sweep import software_versions
+from awda_bench.evaluation.results_store import ResultsStore
+from awda_bench.evaluation.sweep import software_versions
+from awda_bench.reporting import aggregate, tables
+from awda_bench.reporting.figures import plot_success_vs_snapshot
 
 METRIC_TEXT = {
     "success_once": 'success_once: info["success"] was true at some step of the episode',

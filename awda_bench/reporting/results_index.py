@@ -30,8 +30,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
-from awda_bench.harness.aggregate import S4_FAMILIES
-from awda_bench.harness.paper_values import NO_COUNTERPART, S3_ANALYSIS_COLUMNS, S3_COLUMNS
+from awda_bench.reporting.aggregate import S4_FAMILIES
+from awda_bench.reporting.paper_values import NO_COUNTERPART, S3_ANALYSIS_COLUMNS, S3_COLUMNS
 
 INDEX_NAME = "results_sources.toml"
 """The index's file name (in ``reports/``)."""

@@ -27,11 +27,11 @@ import numpy as np
 import pandas as pd
 
 from awda_bench.errors import CorruptFileError, UsageError
-from awda_bench.harness import bootstrap_ci, tables
-from awda_bench.harness.aggregate import ALL, FIRST_GRIP_COLUMNS, S4_FAMILIES, Cell, family_key
-from awda_bench.harness.episode_specs import PROTOCOL_VERSION, protocol_drift
-from awda_bench.harness.methods import get_method
-from awda_bench.harness.paper_values import (
+from awda_bench.evaluation.episode_specs import PROTOCOL_VERSION, protocol_drift
+from awda_bench.evaluation.methods import get_method
+from awda_bench.reporting import bootstrap_ci, tables
+from awda_bench.reporting.aggregate import ALL, FIRST_GRIP_COLUMNS, S4_FAMILIES, Cell, family_key
+from awda_bench.reporting.paper_values import (
     NO_COUNTERPART,
     PAPER_S3,
     PAPER_S3_ANALYSIS,
@@ -43,7 +43,7 @@ from awda_bench.harness.paper_values import (
     S3_ROWS,
     S4_NOT_LEGIBLE,
 )
-from awda_bench.harness.results_index import (
+from awda_bench.reporting.results_index import (
     ANALYSIS_KEYS,
     INDEX_NAME,
     LEARNED_KEYS,
@@ -68,7 +68,7 @@ NOT_RUN = "not run"
 NOT_RECORDED = "not recorded"
 """A first-grip cell of a source evaluated before episodes recorded their first grip."""
 FIRST_GRIP = "first grip: target / other / nothing / never"
-"""The §S3 analysis column of first-grip rates (:data:`~awda_bench.harness.aggregate.FIRST_GRIP_COLUMNS`)."""
+"""The §S3 analysis column of first-grip rates (:data:`~awda_bench.reporting.aggregate.FIRST_GRIP_COLUMNS`)."""
 """What a cell without a source says (its note says why)."""
 
 NO_RUN_YET = "no run yet"
@@ -342,7 +342,7 @@ RATE_TOLERANCE = 1e-9
 
 def protocol_text(report: ReportDir, suites: Sequence[str]) -> str:
     """A source's evaluation protocol per suite: its fingerprint and whether today's code makes the
-    same one (:func:`~awda_bench.harness.episode_specs.protocol_drift`)."""
+    same one (:func:`~awda_bench.evaluation.episode_specs.protocol_drift`)."""
     parts = []
     for suite in suites:
         stored = report.protocols.get(suite)

@@ -18,7 +18,7 @@ import numpy as np
 from awda_bench.data.config import ROLE_SYNTHESIZED
 from awda_bench.data.datasets import CollectedData, EpisodeRef
 from awda_bench.errors import CorruptFileError, UsageError
-from awda_bench.harness.figures import draw_path, project_points, write_png
+from awda_bench.reporting.figures import draw_path, project_points, write_png
 
 
 def synthesized_panel(data: CollectedData, ref: EpisodeRef) -> np.ndarray:

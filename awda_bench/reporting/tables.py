@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from awda_bench.harness.aggregate import ALL, S4_FAMILIES, Cell
+from awda_bench.reporting.aggregate import ALL, S4_FAMILIES, Cell
 
 BINOMIAL_MARK = "†"
 """Suffix of a cell whose SE is binomial over episodes (one snapshot)."""

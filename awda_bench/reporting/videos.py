@@ -20,12 +20,12 @@ from typing import Any
 import numpy as np
 
 from awda_bench.episode import EpisodeSpec
-from awda_bench.harness.episode_record import EpisodeRecord
-from awda_bench.harness.figures import fig_s5, project_points, write_mp4, write_png
-from awda_bench.harness.methods import resolve, select_snapshots
-from awda_bench.harness.results_store import ResultsStore
-from awda_bench.harness.sweep import SweepConfig, sweep_method, sweep_protocol
-from awda_bench.harness.worker_pool import EpisodeExecutor, Job, WorkerConfig
+from awda_bench.evaluation.episode_record import EpisodeRecord
+from awda_bench.evaluation.methods import resolve, select_snapshots
+from awda_bench.evaluation.results_store import ResultsStore
+from awda_bench.evaluation.sweep import SweepConfig, sweep_method, sweep_protocol
+from awda_bench.evaluation.worker_pool import EpisodeExecutor, Job, WorkerConfig
+from awda_bench.reporting.figures import fig_s5, project_points, write_mp4, write_png
 from awda_bench.suites import Suite, load_suite
 
 THIRD_PERSON = "third_person"
@@ -49,7 +49,7 @@ def grab_frame(env: Any) -> tuple[np.ndarray, dict[str, np.ndarray] | None]:
     return (frame[0] if frame.ndim == 4 else frame).astype(np.uint8), None
 
 
-DEFAULT_DEMO_SOURCE = "awda_bench.harness.videos:record_demo_frames"
+DEFAULT_DEMO_SOURCE = "awda_bench.reporting.videos:record_demo_frames"
 """``"module:attribute"`` of ``f(suite, task, demo_seed, cache) -> list of RGB frames``."""
 
 

@@ -22,7 +22,7 @@ with an estimated wall time per stage from the per-unit costs in
 developed on; a GPU trains much faster). What is left is read
 through the functions the commands themselves call, from the config each ``collect`` and ``run``
 stage's command line decides (:class:`~awda_bench.data.config.CollectConfig`,
-:class:`~awda_bench.harness.sweep.SweepConfig`; ``Stage.config``).
+:class:`~awda_bench.evaluation.sweep.SweepConfig`; ``Stage.config``).
 
 Modules, each importing only those above it:
 

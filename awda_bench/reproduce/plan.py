@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 from awda_bench.data.config import CollectConfig
 from awda_bench.errors import UnknownChoiceError, UsageError
-from awda_bench.harness.sweep import SweepConfig
+from awda_bench.evaluation.sweep import SweepConfig
 from awda_bench.primitives.config import GRASP_SELECTS
 from awda_bench.reproduce.config import (
     COLUMN_KEYS,
@@ -125,8 +125,8 @@ def _steps_done(ckpt: Path) -> int:
 
 def _eval_remaining(sweep: SweepConfig) -> int | None:
     """Episodes ``run`` would still play (``None``: cannot tell yet, e.g. no snapshots)."""
-    from awda_bench.harness.results_store import STORE_NAME, ResultsStore
-    from awda_bench.harness.sweep import prepare_sweep
+    from awda_bench.evaluation.results_store import STORE_NAME, ResultsStore
+    from awda_bench.evaluation.sweep import prepare_sweep
 
     if sweep.checkpoints is not None and not _has_snapshots(sweep.checkpoints):
         return None

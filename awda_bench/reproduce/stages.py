@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from awda_bench.errors import AwdaError, CorruptFileError, UsageError
-from awda_bench.harness.parent_death import PARENT_ENV
+from awda_bench.execution.parent_death import PARENT_ENV
 from awda_bench.reproduce.config import ReproduceConfig
 from awda_bench.reproduce.costs import clock
 from awda_bench.reproduce.plan import Stage

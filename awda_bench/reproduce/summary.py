@@ -7,7 +7,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from awda_bench.harness.paper_values import (
+from awda_bench.reporting.paper_values import (
     PAPER_S3,
     PAPER_S3_PICK_PLACE,
     PAPER_S4,
@@ -78,7 +78,7 @@ def command_line(config: ReproduceConfig) -> str:
 
 def write_summary(config: ReproduceConfig) -> Path:
     """``OUT/report/reproduce.md``: scale vs the paper, our rows beside the paper's, costs."""
-    from awda_bench.harness.results_store import STORE_NAME, ResultsStore
+    from awda_bench.evaluation.results_store import STORE_NAME, ResultsStore
     from awda_bench.training.recipe import load_recipe
 
     out = config.out

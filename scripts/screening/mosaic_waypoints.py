@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.harness.env_factory import make_env
-from awda_bench.harness.episode_runner import fresh_scene_options
+from awda_bench.evaluation.env_factory import make_env
+from awda_bench.evaluation.episode_runner import fresh_scene_options
 from awda_bench.suites import load_suite
 
 HIT_M = 0.05

@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from awda_bench.harness.env_factory import make_env
+from awda_bench.evaluation.env_factory import make_env
 from awda_bench.robot.cameras import capture_rgb
 from awda_bench.suites import load_suite
 

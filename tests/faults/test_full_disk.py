@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from awda_bench.harness.results_store import STORE_NAME
+from awda_bench.evaluation.results_store import STORE_NAME
 
 TESTS = Path(__file__).resolve().parent.parent
 EPISODES = 6

@@ -33,7 +33,7 @@ DRIVER = textwrap.dedent(
     signal.signal(signal.SIGINT, signal.default_int_handler)
     sys.path.insert(0, {here!r})
     os.environ["PYTHONPATH"] = os.pathsep.join([{here!r}, os.environ.get("PYTHONPATH", "")])
-    from awda_bench.harness.process_pool import ProcessPool
+    from awda_bench.execution.process_pool import ProcessPool
     from sleepy_executor import SleepyExecutor
 
     class Pool(ProcessPool):

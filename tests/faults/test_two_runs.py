@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 from awda_bench.cli import main
-from awda_bench.harness.results_store import STORE_NAME
+from awda_bench.evaluation.results_store import STORE_NAME
 
 TESTS = Path(__file__).resolve().parent.parent
 
