@@ -1,7 +1,7 @@
 """The package's import graph has no cycles: none between modules, none between rooms.
 
 A *room* is a subpackage of ``awda_bench`` (``robot``, ``envs``, ``evaluation``, ...) or a top-level
-module (``episode``, ``reproduce``, ...); rooms import only downward (docs/design.md, "Layout"). The graph
+module (``episode``, ``runtimes``, ...); rooms import only downward (docs/design.md, "Layout"). The graph
 is read from the source with :mod:`ast`: every ``import`` and ``from ... import``, relative ones
 and those inside functions or under ``TYPE_CHECKING`` included. ``from package import name``
 counts as importing the submodule ``package.name`` when there is one, else the package itself.
@@ -156,3 +156,25 @@ def test_rooms_import_only_downward() -> None:
         if room(a) in component and room(b) in component and room(a) != room(b)
     ]
     assert not found, "rooms importing each other (a cycle):\n" + "\n".join(lines)
+
+
+NEVER_IMPORTS = {
+    "execution": ("data", "evaluation", "reporting"),
+    "data": ("evaluation", "reporting"),
+    "evaluation": ("data", "reporting"),
+}
+"""Room -> rooms it must not import, whatever the rest of the graph allows: job execution knows no
+job type; collection (``data``) and evaluation are two parallel rows over it; reporting reads
+both from above."""
+
+
+def test_evaluation_and_collection_are_two_rows_over_one_executor() -> None:
+    graph = import_graph()
+    assert {"execution", "evaluation", "reporting", "data"} <= {room(m) for m in graph}
+    found = [
+        f"{room(a)} -> {room(b)}: {a} -> {b} ({_where(a, line)})"
+        for a, edges in sorted(graph.items())
+        for b, line in sorted(edges.items())
+        if room(b) in NEVER_IMPORTS.get(room(a), ())
+    ]
+    assert not found, "imports across the executor's rows:\n" + "\n".join(found)
