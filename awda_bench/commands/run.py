@@ -15,6 +15,7 @@ from awda_bench.evaluation.worker_pool import DEFAULT_ENV_FACTORY
 from awda_bench.execution.backends import add_backend_args
 from awda_bench.policies.tosvi_policy import ACTION_SELECTS, tosvi_method_name
 from awda_bench.primitives.config import CENTRE_SUFFIX, GRASP_SELECTS
+from awda_bench.serving.protocol import NATIVE, OPENPI, PROTOCOLS
 from awda_bench.serving.remote_policy import DEFAULT_TIMEOUT_S
 from awda_bench.suites import SIMULATORS, SUITES_DIR, available_suites, load_suite
 
@@ -48,6 +49,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         metavar="ws://HOST:PORT",
         help=f"--method {REMOTE_METHOD}: the policy server (`python -m awda_bench serve`); its "
         "rows are labelled with the method and snapshot it serves",
+    )
+    parser.add_argument(
+        "--protocol",
+        choices=PROTOCOLS,
+        default=NATIVE,
+        help=f"--method {REMOTE_METHOD}: what the server at --policy-url speaks: {NATIVE} "
+        f"(`python -m awda_bench serve`, default) or {OPENPI} (openpi's websocket policy "
+        "protocol: any openpi policy server; docs/serving.md gives the observation keys)",
     )
     parser.add_argument(
         "--policy-timeout",
@@ -193,6 +202,7 @@ def config_from_args(args: argparse.Namespace) -> SweepConfig:
         split=args.split,
         policy_url=args.policy_url,
         policy_timeout_s=args.policy_timeout,
+        policy_protocol=args.protocol,
     )
 
 

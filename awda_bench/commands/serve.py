@@ -6,6 +6,11 @@ evaluate several, serve each in turn (or on several ports) and ``run`` against e
 keyed by the served snapshot's content hash, so they land beside one another in the store as an
 in-process ``run --snapshots N`` puts them. Privileged methods (which read the simulator) cannot
 be served.
+
+``--protocol openpi`` serves it over openpi's websocket policy protocol instead
+(:class:`~awda_bench.serving.openpi_server.OpenpiServer`), for any openpi client
+(``openpi_client.websocket_client_policy.WebsocketClientPolicy``) or
+``run --method remote --protocol openpi``.
 """
 
 from __future__ import annotations
@@ -14,7 +19,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from awda_bench.errors import UsageError
+from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.evaluation.methods import (
     MethodSpec,
     SnapshotRef,
@@ -23,7 +28,8 @@ from awda_bench.evaluation.methods import (
     method_names,
     select_snapshots,
 )
-from awda_bench.serving.protocol import ServerInfo
+from awda_bench.serving.openpi_server import OpenpiServer
+from awda_bench.serving.protocol import NATIVE, OPENPI, PROTOCOLS, ServerInfo
 from awda_bench.serving.server import PolicyServer
 
 DEFAULT_PORT = 8765
@@ -48,6 +54,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--snapshot",
         metavar="NAME",
         help="learned methods: the snapshot file to serve (default: the newest)",
+    )
+    parser.add_argument(
+        "--protocol",
+        choices=PROTOCOLS,
+        default=NATIVE,
+        help=f"{NATIVE}: awda_bench's own (for run --method remote; default); {OPENPI}: openpi's "
+        "websocket policy protocol (for any openpi client, or run --method remote --protocol "
+        "openpi; docs/serving.md gives the observation keys)",
     )
     parser.add_argument(
         "--host",
@@ -83,8 +97,12 @@ def build_server(
     snapshot_name: str | None = None,
     host: str = "127.0.0.1",
     port: int = 0,
+    protocol: str = NATIVE,
 ) -> PolicyServer:
-    """A server of ``method`` (one snapshot), listening; one line if it cannot be served."""
+    """A server of ``method`` (one snapshot) speaking ``protocol``, listening; one line if it
+    cannot be served."""
+    if protocol not in PROTOCOLS:
+        raise UnknownChoiceError("--protocol", protocol, PROTOCOLS)
     spec = get_method(method)
     if spec.privileged:
         raise UsageError(
@@ -101,8 +119,9 @@ def build_server(
         snapshot_order=snapshot.order,
         learned=spec.learned,
     )
+    server = OpenpiServer if protocol == OPENPI else PolicyServer
     try:
-        return PolicyServer(lambda: make_policy(spec, snapshot), info, host, port)
+        return server(lambda: make_policy(spec, snapshot), info, host, port)
     except OSError as exc:
         raise UsageError(
             f"cannot listen on {host}:{port} ({exc.strerror or exc}); choose another --port or "
@@ -111,13 +130,16 @@ def build_server(
 
 
 def run(args: argparse.Namespace) -> int:
-    server = build_server(args.method, args.checkpoints, args.snapshot, args.host, args.port)
+    server = build_server(
+        args.method, args.checkpoints, args.snapshot, args.host, args.port, args.protocol
+    )
     with server:
         info = server.info
+        flag = "" if args.protocol == NATIVE else f" --protocol {args.protocol}"
         print(
             f"serving {info.method} (snapshot {info.snapshot_name}) on {server.url}; evaluate it "
             f"with `python -m awda_bench run --suite SUITE --method remote --policy-url "
-            f"{server.url}`",
+            f"{server.url}{flag}`",
             flush=True,
         )
         try:

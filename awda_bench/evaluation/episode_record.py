@@ -56,6 +56,10 @@ class EpisodeRecord:
     """Traceback or watchdog message when ``status == "error"``."""
     waypoints: list[list[float]] | None = None
     """Attributed waypoints ``(K, 3 + k)`` the method predicted, if it predicts any."""
+    server: dict[str, Any] | None = None
+    """A policy served over openpi's protocol: what its server said about the episode (protocol,
+    metadata, requests, ``server_timing`` mean and max per key; the policy's ``server_notes``);
+    stored as JSON in the ``server`` column. ``None`` for every other policy."""
     setup_time_s: float = 0.0
     """Time spent building the policy just before this episode (a worker's first episode of a
     snapshot) [s]; not part of :attr:`wall_time_s`, not stored (throughput accounting only)."""

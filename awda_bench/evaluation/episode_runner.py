@@ -145,6 +145,7 @@ def run_episode(
             on_frame(env)
 
     waypoints = policy.waypoints
+    server_notes = getattr(policy, "server_notes", None)  # a served policy's (openpi)
     return EpisodeRecord(
         suite=spec.suite,
         task=spec.task,
@@ -165,4 +166,5 @@ def run_episode(
         act_time_s=act_time,
         env_time_s=env_time,
         waypoints=None if waypoints is None else np.asarray(waypoints, dtype=float).tolist(),
+        server=None if server_notes is None else dict(server_notes),
     )

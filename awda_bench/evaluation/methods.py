@@ -17,9 +17,9 @@ static methods of a policy class)::
 and is then evaluated per snapshot with ``--checkpoints DIR``: ``Factory(path)`` builds the
 policy of one snapshot, and each snapshot is keyed in the store by its content hash.
 
-A served method (``--method remote --policy-url ws://HOST:PORT``, see :mod:`awda_bench.serving`)
-is named and keyed by what its server says it serves (:func:`served_method`): one snapshot per
-server, its rows labelled with the served method's name.
+A served method (``--method remote --policy-url ws://HOST:PORT [--protocol openpi]``, see
+:mod:`awda_bench.serving`) is named and keyed by what its server says it serves
+(:func:`served_method`): one snapshot per server, its rows labelled with the served method's name.
 """
 
 from __future__ import annotations
@@ -32,6 +32,8 @@ from typing import Any
 
 from awda_bench.episode import Policy, is_privileged
 from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
+from awda_bench.serving.openpi_policy import OpenpiPolicy, fetch_openpi_metadata
+from awda_bench.serving.protocol import NATIVE, OPENPI, PROTOCOLS
 from awda_bench.serving.remote_policy import (
     DEFAULT_TIMEOUT_S,
     RemotePolicy,
@@ -111,7 +113,8 @@ def get_method(name: str) -> MethodSpec:
     if name == REMOTE_METHOD:
         raise UsageError(
             f"--method {REMOTE_METHOD} needs --policy-url ws://HOST:PORT (a server started with "
-            "`python -m awda_bench serve --method ...`)"
+            "`python -m awda_bench serve --method ...`, or with --protocol openpi any openpi "
+            "policy server)"
         )
     if name in _REGISTRY:
         return _REGISTRY[name]
@@ -142,16 +145,24 @@ def get_method(name: str) -> MethodSpec:
     raise UnknownChoiceError("method", name, [*method_names(), "module:attribute"])
 
 
-def served_method(url: str, timeout_s: float = DEFAULT_TIMEOUT_S) -> MethodSpec:
-    """The method served at ``url``, named as its server says (one line if it cannot be
-    reached)."""
-    info = fetch_server_info(url, timeout_s)
+def served_method(
+    url: str, timeout_s: float = DEFAULT_TIMEOUT_S, protocol: str = NATIVE
+) -> MethodSpec:
+    """The method served at ``url`` over ``protocol`` (``awda`` or ``openpi``), named as its server
+    says (one line if it cannot be reached)."""
+    if protocol not in PROTOCOLS:
+        raise UnknownChoiceError("protocol", protocol, list(PROTOCOLS))
+    if protocol == OPENPI:
+        info, _ = fetch_openpi_metadata(url, timeout_s)
+        player: type = OpenpiPolicy
+    else:
+        info, player = fetch_server_info(url, timeout_s), RemotePolicy
     return MethodSpec(
         name=info.method,
-        target=f"{RemotePolicy.__module__}:{RemotePolicy.__name__}",
+        target=f"{player.__module__}:{player.__name__}",
         learned=info.learned,
-        description=f"served at {url}",
-        served=ServedMethod(url=url, info=info, timeout_s=timeout_s),
+        description=f"served at {url} ({protocol} protocol)",
+        served=ServedMethod(url=url, info=info, timeout_s=timeout_s, protocol=protocol),
     )
 
 
@@ -176,6 +187,8 @@ def resolve(target: str, *, what: str) -> Any:
 def make_policy(spec: MethodSpec, snapshot: SnapshotRef) -> Policy:
     """Build the policy of ``spec`` for ``snapshot`` (called inside workers)."""
     if spec.served is not None:
+        if spec.served.protocol == OPENPI:
+            return OpenpiPolicy(spec.served, name=spec.name)
         return RemotePolicy(spec.served, name=spec.name)
     factory = resolve(spec.target, what=f"method {spec.name!r}")
     policy = factory(snapshot.path) if spec.learned else factory()

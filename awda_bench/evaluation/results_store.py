@@ -86,6 +86,7 @@ CREATE TABLE IF NOT EXISTS episodes (
     status TEXT NOT NULL CHECK (status IN ('ok', 'error')),
     error TEXT,
     waypoints TEXT,
+    server TEXT,
     attempts INTEGER NOT NULL DEFAULT 1,
     finished_at REAL NOT NULL,
     PRIMARY KEY (protocol, method, snapshot, task, episode)
@@ -122,11 +123,13 @@ EPISODE_COLUMNS = (
     "status",
     "error",
     "waypoints",
+    "server",
 )
 
 ADDED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("snapshots", "privileged", "INTEGER"),
     ("episodes", "first_grip", "TEXT"),
+    ("episodes", "server", "TEXT"),
 )
 """(table, column, type) added since schema 1 without bumping it: an older store opened to
 write gains them; one opened to read shows them as NULL."""
@@ -227,7 +230,8 @@ class ResultsStore:
 
     def _add_missing_columns(self) -> None:
         """A store written before a column existed gains it (NULL: unknown): ``privileged``
-        (before methods declared privilege), ``first_grip`` (before the first-grip analysis)."""
+        (before methods declared privilege), ``first_grip`` (before the first-grip analysis),
+        ``server`` (before openpi-served policies)."""
         for table, column, kind in ADDED_COLUMNS:
             columns = {r[1] for r in self._conn.execute(f"PRAGMA table_info({table})")}
             if column not in columns:
@@ -350,6 +354,7 @@ class ResultsStore:
             rec.status,
             rec.error,
             None if rec.waypoints is None else json.dumps(rec.waypoints),
+            None if rec.server is None else json.dumps(rec.server, sort_keys=True),
         )
         placeholders = ", ".join("?" * len(EPISODE_COLUMNS))
         columns = ", ".join(EPISODE_COLUMNS)

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from awda_bench.errors import UsageError
+from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.evaluation.episode_pools import EpisodePool, open_pool
 from awda_bench.evaluation.episode_record import STATUS_OK, EpisodeRecord
 from awda_bench.evaluation.episode_specs import EvalProtocol, build_episode_specs, make_protocol
@@ -45,6 +45,7 @@ from awda_bench.runtimes import (
     worker_python,
     worker_versions,
 )
+from awda_bench.serving.protocol import NATIVE, PROTOCOLS
 from awda_bench.serving.remote_policy import DEFAULT_TIMEOUT_S
 from awda_bench.suites import SIMULATORS, SUITES_DIR, Suite, load_suite
 
@@ -94,6 +95,9 @@ class SweepConfig:
     """``method="remote"``: the policy server's ``ws://HOST:PORT``."""
     policy_timeout_s: float = DEFAULT_TIMEOUT_S
     """``method="remote"``: longest wait for one message from the server [s]."""
+    policy_protocol: str = NATIVE
+    """``method="remote"``: what the server speaks, ``"awda"`` (``python -m awda_bench serve``)
+    or ``"openpi"`` (openpi's websocket policy protocol)."""
 
 
 @dataclass(frozen=True)
@@ -141,14 +145,21 @@ class SweepResult:
 def sweep_method(config: SweepConfig) -> MethodSpec:
     """``config.method``'s spec (for ``remote``: what the server at ``config.policy_url``
     serves), named ``config.label`` when one is given."""
+    if config.policy_protocol not in PROTOCOLS:
+        raise UnknownChoiceError("--protocol", config.policy_protocol, PROTOCOLS)
     if config.method == REMOTE_METHOD and config.policy_url is not None:
         if config.policy_timeout_s <= 0:
             raise UsageError(f"--policy-timeout must be positive (got {config.policy_timeout_s})")
-        method = served_method(config.policy_url, config.policy_timeout_s)
+        method = served_method(config.policy_url, config.policy_timeout_s, config.policy_protocol)
     elif config.policy_url is not None:
         raise UsageError(
             f"--policy-url applies to --method {REMOTE_METHOD}, not {config.method!r}; "
             "drop --policy-url or use --method remote"
+        )
+    elif config.policy_protocol != NATIVE and config.method != REMOTE_METHOD:
+        raise UsageError(
+            f"--protocol {config.policy_protocol} applies to --method {REMOTE_METHOD} "
+            f"--policy-url ws://HOST:PORT, not --method {config.method!r}"
         )
     else:
         method = get_method(config.method)

@@ -13,6 +13,9 @@ class RandomPolicy:
     """``a_t ~ U[-1, 1]^4`` per env, from a generator seeded with the episode's seed."""
 
     name = "random"
+    observation_keys: tuple[str, ...] = ()
+    """It reads no observation: served over openpi's protocol (``serve --protocol openpi``), the
+    harness sends it the episode keys only (docs/serving.md)."""
 
     def __init__(self) -> None:
         self._rng = np.random.default_rng(0)

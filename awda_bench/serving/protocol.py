@@ -33,6 +33,13 @@ from typing import Any
 PROTOCOL = "awda-policy/1"
 """Name and version of this conversation; the client refuses a server speaking another."""
 
+NATIVE = "awda"
+"""``--protocol awda`` (the default): this conversation."""
+OPENPI = "openpi"
+"""``--protocol openpi``: openpi's websocket policy protocol (:mod:`.openpi_schema`)."""
+PROTOCOLS = (NATIVE, OPENPI)
+"""The ``--protocol`` choices of ``serve`` and ``run --method remote``."""
+
 MAX_MESSAGE_BYTES = 256 * 1024 * 1024
 """Largest message either side accepts (ten demo frames are 2.3 MB)."""
 

@@ -10,22 +10,29 @@ connection is closed, and the next episode connects afresh (a restarted server i
 
 from __future__ import annotations
 
-from contextlib import ExitStack
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
-from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidURI
-from websockets.sync.client import ClientConnection, connect
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import ClientConnection
 
 from awda_bench.episode import EpisodeContext, Observations, observations_of
 from awda_bench.errors import RemotePolicyError
+from awda_bench.serving.connection import (
+    DEFAULT_TIMEOUT_S,
+    lost_connection,
+    open_connection,
+    receive,
+    server_peer,
+)
 from awda_bench.serving.protocol import (
     ACT,
     ACTION,
     ERROR,
     HELLO,
-    MAX_MESSAGE_BYTES,
+    NATIVE,
     OBSERVATION,
     OBSERVATION_CALLS,
     OBSERVATION_ERROR,
@@ -35,10 +42,10 @@ from awda_bench.serving.protocol import (
     RESET_DONE,
     ServerInfo,
 )
-from awda_bench.serving.wire import pack, unpack
+from awda_bench.serving.wire import NOT_OURS, decode, pack, unpack
 
-DEFAULT_TIMEOUT_S = 60.0
-"""How long the harness waits for any one message from the server [s]."""
+START_HINT = "`python -m awda_bench serve --method ... --port PORT`"
+"""How errors say to start a native server."""
 
 ACTION_DIM = 4
 """dx, dy, dz, grip."""
@@ -55,43 +62,40 @@ class ServedMethod:
     another method or snapshot."""
     timeout_s: float = DEFAULT_TIMEOUT_S
     """Longest wait for one message [s]."""
+    protocol: str = NATIVE
+    """What the server speaks: :data:`~.protocol.NATIVE` (``awda-policy/1``, played by
+    :class:`RemotePolicy`) or :data:`~.protocol.OPENPI` (played by
+    :class:`~.openpi_policy.OpenpiPolicy`)."""
 
 
 def _open(url: str, timeout_s: float) -> tuple[ClientConnection, ServerInfo]:
     """Connect and read the server's hello."""
-    peer = f"the policy server at {url}"
+    peer = server_peer(url)
+    connection = open_connection(url, timeout_s, START_HINT)
     try:
-        with ExitStack() as stack:  # websockets 17 wants connect() entered as a context
-            connection = stack.enter_context(
-                connect(
-                    url,
-                    open_timeout=timeout_s,
-                    compression=None,
-                    max_size=MAX_MESSAGE_BYTES,
-                    proxy=None,
-                )
-            )
-            stack.pop_all()  # the caller closes it
-    except InvalidURI as exc:
-        raise RemotePolicyError(f"--policy-url {url!r} is not a ws://HOST:PORT address") from exc
-    except (OSError, TimeoutError, InvalidHandshake) as exc:
-        raise RemotePolicyError(
-            f"cannot reach {peer} ({type(exc).__name__}: {exc}); start it with "
-            "`python -m awda_bench serve --method ... --port PORT` or fix --policy-url"
-        ) from exc
-    try:
-        hello = unpack(connection.recv(timeout=timeout_s), peer=peer)
+        data = connection.recv(timeout=timeout_s)
     except (TimeoutError, ConnectionClosed) as exc:
         connection.close()
         raise RemotePolicyError(
             f"{peer} accepted the connection but said nothing ({type(exc).__name__}); is it "
             "`python -m awda_bench serve`?"
         ) from exc
+    try:
+        hello = decode(data, peer=peer, hint=NOT_OURS) if isinstance(data, bytes) else None
+    except RemotePolicyError:
+        connection.close()
+        raise
+    if not isinstance(hello, dict) or "type" not in hello:
+        connection.close()
+        raise RemotePolicyError(
+            f"{peer} does not speak {PROTOCOL} (its first message is not a hello); for an openpi "
+            "policy server give --protocol openpi"
+        )
     if hello.get("type") != HELLO or hello.get("protocol") != PROTOCOL:
         connection.close()
         raise RemotePolicyError(
             f"{peer} speaks {hello.get('protocol')!r}, this harness {PROTOCOL!r}; run the same "
-            "awda_bench version on both sides"
+            "awda_bench version on both sides (or, for an openpi server, give --protocol openpi)"
         )
     return connection, ServerInfo.from_message(hello)
 
@@ -103,25 +107,32 @@ def fetch_server_info(url: str, timeout_s: float = DEFAULT_TIMEOUT_S) -> ServerI
     return info
 
 
-def check_action(action: Any, num_envs: int, peer: str) -> np.ndarray:
-    """``action`` if it is a finite ``(num_envs, 4)`` numeric array, else a one-line error."""
-    shape = (num_envs, ACTION_DIM)
+def check_actions(
+    action: Any, peer: str, accept: Callable[[tuple[int, ...]], bool], expected: str
+) -> np.ndarray:
+    """``action`` if it is a finite numeric array whose shape ``accept`` takes, else a one-line
+    error (``expected`` names the shapes taken)."""
     if not isinstance(action, np.ndarray) or action.dtype.kind not in "iuf":
         raise RemotePolicyError(
             f"{peer} returned a {type(action).__name__} as the action, not a numeric array; "
-            f"the served policy's act must return a {shape} float array"
+            f"the served policy must return a {expected} float array"
         )
-    if action.shape != shape:
+    if not accept(action.shape):
         raise RemotePolicyError(
-            f"{peer} returned an action of shape {action.shape}, expected {shape} (dx, dy, dz, "
-            "grip per env); fix the served policy's act"
+            f"{peer} returned an action of shape {action.shape}, expected {expected}; fix the "
+            "served policy"
         )
     if not np.isfinite(action).all():
         raise RemotePolicyError(
-            f"{peer} returned an action with NaN or inf ({action.tolist()}); fix the served "
-            "policy's act"
+            f"{peer} returned an action with NaN or inf ({action.tolist()}); fix the served policy"
         )
     return action
+
+
+def check_action(action: Any, num_envs: int, peer: str) -> np.ndarray:
+    """``action`` if it is a finite ``(num_envs, 4)`` numeric array, else a one-line error."""
+    shape = (num_envs, ACTION_DIM)
+    return check_actions(action, peer, lambda s: s == shape, f"{shape} (dx, dy, dz, grip per env)")
 
 
 class RemotePolicy:
@@ -132,7 +143,7 @@ class RemotePolicy:
     def __init__(self, served: ServedMethod, name: str | None = None) -> None:
         self.served = served
         self.name = name or served.info.method
-        self._peer = f"the policy server at {served.url}"
+        self._peer = server_peer(served.url)
         self._connection: ClientConnection | None = None
         self._observations: Observations | None = None
         self._done = False
@@ -188,14 +199,7 @@ class RemotePolicy:
         try:
             connection.send(pack(message))
             while True:
-                try:
-                    data = connection.recv(timeout=self.served.timeout_s)
-                except TimeoutError as exc:
-                    raise RemotePolicyError(
-                        f"{self._peer} sent nothing for {self.served.timeout_s:g} s during "
-                        f"{during}; if the policy is slow raise --policy-timeout, else check the "
-                        "server's log"
-                    ) from exc
+                data = receive(connection, self.served.timeout_s, self._peer, during)
                 reply = unpack(data, peer=self._peer)
                 if reply["type"] == OBSERVE:
                     self._answer(connection, reply)
@@ -218,11 +222,7 @@ class RemotePolicy:
             raise  # the conversation is in step: keep the connection
         except ConnectionClosed as exc:
             self.close()
-            raise RemotePolicyError(
-                f"lost the connection to {self._peer} during {during} ({exc}); restart the "
-                "server and re-run the same command (this episode is recorded as an error "
-                "and retried)"
-            ) from exc
+            raise lost_connection(self._peer, during, exc) from exc
         except BaseException:
             self.close()  # out of step (timeout, bad message): the next episode reconnects
             raise

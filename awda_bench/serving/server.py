@@ -114,6 +114,11 @@ class PolicyServer:
                 return self._idle.pop()
         return self._make_policy()
 
+    def _give_back(self, policy: Policy) -> None:
+        """A finished connection's policy, back to the idle pool."""
+        with self._lock:
+            self._idle.append(policy)
+
     def _handle(self, connection: ServerConnection) -> None:
         policy = self._take_policy()
         session = _Session(connection, policy, self.info)
@@ -138,8 +143,7 @@ class PolicyServer:
         except ConnectionClosed:
             pass  # the harness went away (finished, killed, or timed out): nothing to answer
         finally:
-            with self._lock:
-                self._idle.append(policy)
+            self._give_back(policy)
 
     def serve_forever(self) -> None:
         """Serve until :meth:`shutdown` (or the process ends)."""
