@@ -1,16 +1,19 @@
-"""``python -m awda_bench bench serve``: what serving a policy costs, side by side in one run.
+"""``python -m awda_bench bench serve``: what serving a policy costs, side by side in one run, for
+both protocols (``--protocol awda``, the default, and ``--protocol openpi``).
 
 1. Round-trip latency per control step on loopback, server in its own process
-   (``python -m awda_bench serve``): ``act`` with one 240x320x3 uint8 frame up (the served
-   policy asks for ``obs.rgb()``, the harness answers) and one action down, and ``act`` with
-   nothing up (``random``)::
+   (``python -m awda_bench serve [--protocol openpi]``): a step with one 240x320x3 uint8 frame up
+   and one action down, and a step with nothing up (the served policy reads nothing)::
 
-       harness --act--> server --observe rgb--> harness --frame (230 kB)--> server --action--> harness
+       awda:   harness --act--> server --observe rgb--> harness --frame (230 kB)--> server --action--> harness
+       openpi: harness --observation dict with the frame (230 kB)--> server --actions--> harness
 
-   median and 99th percentile over ``--steps`` steps, after ``--warmup``.
-2. The harness's episodes/min with ``random`` in-process against ``random`` served (the same
-   sweep: suite, episodes, seeds, worker count; each into its own temporary store), and whether
-   the two gave identical per-episode outcomes::
+   (the native server asks for what its policy reads; the openpi client sends what the server's
+   metadata lists, ``observation_keys``), median and 99th percentile over ``--steps`` steps,
+   after ``--warmup``, and the ratio of the medians, openpi / awda.
+2. The harness's episodes/min with ``random`` in-process against ``random`` served over each
+   protocol (the same sweep: suite, episodes, seeds, worker count; each into its own temporary
+   store), and whether each gave the in-process per-episode outcomes::
 
        episodes/min         = episodes / sweep wall time * 60   (worker start-up included)
        steady episodes/min  = episodes / (wall - start-up) * 60
@@ -27,7 +30,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager, nullcontext
 from pathlib import Path
 from typing import Any
 
@@ -38,11 +41,16 @@ from awda_bench.episode import EpisodeContext, EpisodeSpec
 from awda_bench.evaluation.methods import served_method
 from awda_bench.evaluation.results_store import STORE_NAME
 from awda_bench.evaluation.sweep import SweepConfig, SweepResult, run_sweep
+from awda_bench.serving.openpi_policy import OpenpiPolicy
+from awda_bench.serving.openpi_schema import IMAGE
+from awda_bench.serving.protocol import NATIVE, OPENPI, PROTOCOLS
 from awda_bench.serving.remote_policy import RemotePolicy
 from awda_bench.suites import SUITES_DIR
 
 FRAME_SHAPE = (240, 320, 3)
 """The third-person frame the latency probe sends up each step."""
+EPISODE_STEPS = 100_000
+"""The latency probe's steps per episode (one episode: every timed step is an ``act``)."""
 
 
 class FrameReadingPolicy:
@@ -50,6 +58,8 @@ class FrameReadingPolicy:
     and returns a zero action (one action down)."""
 
     name = "frame-reading"
+    observation_keys: tuple[str, ...] = (IMAGE,)
+    """Served over openpi's protocol: the frame only."""
 
     def reset(self, ctx: EpisodeContext) -> None:
         pass
@@ -67,6 +77,16 @@ class FrameReadingPolicy:
     @property
     def waypoints(self) -> np.ndarray | None:
         return None
+
+
+class BlindPolicy(FrameReadingPolicy):
+    """The latency probe's served policy that reads nothing (nothing up, one action down)."""
+
+    name = "blind"
+    observation_keys = ()
+
+    def act(self, obs: Any) -> np.ndarray:
+        return np.zeros((obs.num_envs, 4), np.float32)
 
 
 class _FixedFrame:
@@ -98,33 +118,38 @@ def add_serve_args(parser: argparse.ArgumentParser) -> None:
 
 
 @contextmanager
-def _server(method: str) -> Iterator[str]:
-    """``python -m awda_bench serve --method METHOD`` on a free port, in its own process."""
+def _server(method: str, protocol: str = NATIVE) -> Iterator[str]:
+    """``python -m awda_bench serve --method METHOD --protocol PROTOCOL`` on a free port, in its
+    own process."""
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     command = [sys.executable, "-m", "awda_bench", "serve", "--method", method, "--port", "0"]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, text=True, env=env)
+    process = subprocess.Popen(
+        [*command, "--protocol", protocol], stdout=subprocess.PIPE, text=True, env=env
+    )
     try:
         assert process.stdout is not None
         line = process.stdout.readline()
         if " on ws://" not in line:
             raise RuntimeError(f"the policy server did not start (exit {process.wait()})")
-        yield line.split(" on ")[1].split(";")[0]
+        yield line.split(" on ")[1].split(";")[0].split(" ")[0]
     finally:
         process.terminate()
         process.wait(timeout=30)
 
 
-def _latency_ms(url: str, steps: int, warmup: int) -> np.ndarray:
-    """Per-``act`` round-trip times [ms] of a :class:`RemotePolicy` on ``url``."""
-    served = served_method(url).served
+def _latency_ms(url: str, protocol: str, steps: int, warmup: int) -> np.ndarray:
+    """Per-``act`` round-trip times [ms] of the harness's policy for ``protocol`` on ``url``."""
+    served = served_method(url, protocol=protocol).served
     assert served is not None
-    policy = RemotePolicy(served)
+    policy = OpenpiPolicy(served) if protocol == OPENPI else RemotePolicy(served)
     observations = _FixedFrame()
     spec = EpisodeSpec(suite="bench", task=0, episode=0, seed=0, demo_seed=0)
-    policy.reset(EpisodeContext(None, spec, observations=observations))  # type: ignore[arg-type]
+    ctx = EpisodeContext(None, spec, observations=observations)  # type: ignore[arg-type]
     times = []
     try:
         for step in range(warmup + steps):
+            if step % EPISODE_STEPS == 0:  # openpi's first request of an episode is in reset
+                policy.reset(ctx)
             t0 = time.perf_counter()
             policy.act(observations)
             if step >= warmup:
@@ -142,32 +167,44 @@ def _steps(run_dir: Path) -> int:
         db.close()
 
 
+def _summary(ms: np.ndarray) -> str:
+    return f"{np.median(ms):5.2f} / {np.percentile(ms, 99):5.2f}"
+
+
 def run_serve_bench(args: argparse.Namespace) -> int:
-    print("round trip per step on loopback (server in its own process):")
-    for method, what in (
-        (f"{__name__}:FrameReadingPolicy", "one 240x320x3 uint8 frame up, one action down"),
-        ("random", "nothing up, one action down"),
+    print(
+        "round trip per step on loopback (server in its own process), median / p99 ms over "
+        f"{args.steps} steps:"
+    )
+    print(f"  {'':<48} {NATIVE:>15} {OPENPI:>15} {OPENPI + ' / ' + NATIVE:>14}")
+    for policy, what in (
+        (FrameReadingPolicy, "one 240x320x3 uint8 frame up, one action down"),
+        (BlindPolicy, "nothing up, one action down"),
     ):
-        with _server(method) as url:
-            ms = _latency_ms(url, args.steps, args.warmup)
+        latency = {}
+        for protocol in PROTOCOLS:
+            with _server(f"{__name__}:{policy.__name__}", protocol) as url:
+                latency[protocol] = _latency_ms(url, protocol, args.steps, args.warmup)
+        ratio = np.median(latency[OPENPI]) / np.median(latency[NATIVE])
         print(
-            f"  {what:<48} median {np.median(ms):6.2f} ms  p99 {np.percentile(ms, 99):6.2f} ms  "
-            f"({len(ms)} steps)"
+            f"  {what:<48} {_summary(latency[NATIVE]):>15} {_summary(latency[OPENPI]):>15} "
+            f"{ratio:>13.2f}x"
         )
 
     rows: list[tuple[str, SweepResult, int]] = []
     outcomes = []
     with tempfile.TemporaryDirectory(prefix="awda-bench-serve-") as tmp:
-        with _server("random") as url:
-            for label, method, policy_url in (
-                ("in-process", "random", None),
-                ("served", "remote", url),
-            ):
-                out = Path(tmp) / label
+        for label, over in (("in-process", None), *((f"{p} served", p) for p in PROTOCOLS)):
+            out = Path(tmp) / label.replace(" ", "-")
+            server: AbstractContextManager[str | None] = (
+                _server("random", over) if over else nullcontext(None)
+            )
+            with server as policy_url:
                 config = SweepConfig(
                     suite=args.suite,
-                    method=method,
+                    method="remote" if over else "random",
                     policy_url=policy_url,
+                    policy_protocol=over or NATIVE,
                     out=out,
                     episodes=args.episodes,
                     seed=args.seed,
@@ -177,28 +214,29 @@ def run_serve_bench(args: argparse.Namespace) -> int:
                     command=f"bench serve ({label})",
                 )
                 rows.append((label, run_sweep(config), _steps(out)))
-                outcomes.append(episode_outcomes(out))
+            outcomes.append(episode_outcomes(out))
     print(
         f"harness throughput, {args.suite} / random, {args.episodes} episodes per task, "
         f"{args.workers} worker(s):"
     )
     print(
-        f"  {'':>10} {'episodes':>8} {'wall s':>7} {'ep/min':>7} {'steady':>7} "
-        f"{'act ms/step':>11} {'env ms/step':>11}"
+        f"  {'':>14} {'episodes':>8} {'wall s':>7} {'ep/min':>7} {'steady':>7} "
+        f"{'act ms/step':>11} {'env ms/step':>11}  {'/ in-process':>12}"
     )
+    local = rows[0][1]
     for label, r, steps in rows:
         busy = max(r.wall_time_s - r.startup_s, 1e-9)
+        relative = r.ran / r.wall_time_s / (local.ran / local.wall_time_s)
         print(
-            f"  {label:>10} {r.ran:>8} {r.wall_time_s:>7.1f} {r.ran / r.wall_time_s * 60:>7.2f} "
+            f"  {label:>14} {r.ran:>8} {r.wall_time_s:>7.1f} {r.ran / r.wall_time_s * 60:>7.2f} "
             f"{r.ran / busy * 60:>7.2f} {r.act_time_s / max(steps, 1) * 1e3:>11.2f} "
-            f"{r.env_time_s / max(steps, 1) * 1e3:>11.2f}"
+            f"{r.env_time_s / max(steps, 1) * 1e3:>11.2f}  {relative:>11.2f}x"
         )
-    (_, local, _), (_, served, _) = rows
-    print(
-        f"  served / in-process: {served.ran / served.wall_time_s / (local.ran / local.wall_time_s):.2f}x"
-        " episodes/min"
-    )
-    same = outcomes[0] == outcomes[1]
-    print(f"identical per-episode outcomes, served vs in-process: {'yes' if same else 'NO'}")
+    same = [o == outcomes[0] for o in outcomes[1:]]
+    for protocol, equal in zip(PROTOCOLS, same, strict=True):
+        print(
+            f"identical per-episode outcomes, {protocol} served vs in-process: "
+            f"{'yes' if equal else 'NO'}"
+        )
     errors = sum(r.errors for _, r, _ in rows)
-    return 0 if same and not errors else 1
+    return 0 if all(same) and not errors else 1

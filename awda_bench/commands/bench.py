@@ -11,7 +11,8 @@ imports the chosen one alone, so the CLI starts fast):
     render-cost   a frame's render time per render body (and with the robot's meshes decimated)
     inference   waypoint network forward latency
     soft-dtw    the multi-waypoint Soft-DTW loss per implementation (and its share of a step)
-    serve       a served policy: loopback round trip per step, episodes/min served vs in-process
+    serve       a served policy, both protocols (awda, openpi) side by side: loopback round trip
+                per step, episodes/min served vs in-process
     metaworld   Meta-World frames (models' own render settings vs fast) and expert lengths, run in
                 .venv-metaworld
 """
