@@ -17,6 +17,10 @@ rule, awda_bench.waypoints.extract_waypoints, K = 5):
     spread      mean distance of a pair's predicted waypoints to the task's mean prediction (cm),
                 beside the true waypoints' own spread (layouts differ: a model that reads the
                 scene must spread about as much as the truth)
+    obj / moved ``demo-pointer`` snapshots: fraction of pairs whose object softmax (o_1) and
+                what-moved softmax (the demo) peak within one cell (Chebyshev) of the
+                identification label: the first grasp, or where the hand first moves the
+                object on a task without one (awda_bench/data/contact_point.py)
 """
 
 import sys
@@ -26,6 +30,7 @@ import numpy as np
 import torch
 
 from awda_bench.data.datasets import AwdaPairDataset, CollectedData, Selection
+from awda_bench.models.identification_loss import grasp_cells_per_camera
 from awda_bench.models.snapshot import load_snapshot
 from awda_bench.training.feature_cache import load_or_build
 from awda_bench.training.feature_datasets import CachedAwdaPairs, frames_needed
@@ -43,6 +48,7 @@ pairs = AwdaPairDataset(
     include_synthesized=False,
     allow_test=True,
     selection=Selection(tasks=tasks),
+    contact_points=True,
 )
 cache = load_or_build(data, trunk, frames_needed(pairs), progress=False)
 ds = CachedAwdaPairs(pairs, cache)
@@ -59,7 +65,29 @@ with torch.no_grad():
             torch.stack([s["camera"] for s in samples]) if "camera" in samples[0] else None,
         )
         largest = model.waypoint_sets(raw)[-1].numpy()
-        for i, wps in zip(chunk, largest, strict=True):
+        near = {"obj": [np.nan] * len(samples), "moved": [np.nan] * len(samples)}
+        if hasattr(model.scene_head, "pointer"):  # demo-pointer: its identification softmaxes
+            batch = torch.utils.data.default_collate(samples)
+            camera = model.camera_indices(batch.get("camera"), len(samples))
+            demo, first = model.cached_maps(batch["demo_features"], batch["first_frame_features"])
+            out = model.scene_head.pointer(demo, first, torch.zeros_like(batch["head"]), camera)
+            width = model.grid[1]
+            for key, logits, traj, contact in (
+                ("obj", out.object_logits, batch["trajectory"], batch["contact"]),
+                ("moved", out.moved_logits, batch["demo_trajectory"], batch["demo_contact"]),
+            ):
+                cells, ok = grasp_cells_per_camera(
+                    traj, model.ray_cameras, camera, model.grid, contact
+                )
+                for j, (want, got) in enumerate(
+                    zip(cells.tolist(), logits.argmax(1).tolist(), strict=True)
+                ):
+                    if ok[j]:
+                        apart = max(
+                            abs(want // width - got // width), abs(want % width - got % width)
+                        )
+                        near[key][j] = float(apart <= 1)
+        for n, (i, wps) in enumerate(zip(chunk, largest, strict=True)):
             agent = pairs.pairs[i][0]
             names[agent.task] = agent.meta.get("task_name", str(agent.task))
             grasp = data.attributes(agent, ("grasp",))[:, 0] > 0.5
@@ -77,6 +105,8 @@ with torch.no_grad():
                     "pred_grasp": bool(flags.any()),
                     "true_grasp": bool(on.size),
                     "grasp_err": grasp_err,
+                    "obj": near["obj"][n],
+                    "moved": near["moved"][n],
                     "pred": wps[:, :3],
                     "true": true[:, :3],
                 }
@@ -89,7 +119,10 @@ def spread(points: list[np.ndarray]) -> float:
 
 
 print(f"snapshot {sys.argv[1]}  data {sys.argv[2]}  pairs {len(ds)}")
-print("task                      pairs  wp err  end err  grasp pred/true  grasp err  spread pred/true")
+print(
+    "task                      pairs  wp err  end err  grasp pred/true  grasp err  spread pred/true"
+    "  obj/moved within 1 cell"
+)
 all_wp, all_end = [], []
 for task in sorted(rows):
     r = rows[task]
@@ -103,5 +136,6 @@ for task in sorted(rows):
         f"{np.mean([x['pred_grasp'] for x in r]):6.2f}/{np.mean([x['true_grasp'] for x in r]):.2f}"
         f"  {np.nanmedian(ge) if np.isfinite(ge).any() else float('nan'):9.1f}"
         f"  {spread([x['pred'] for x in r]):6.1f}/{spread([x['true'] for x in r]):.1f}"
+        f"  {np.nanmean([x['obj'] for x in r]):.2f}/{np.nanmean([x['moved'] for x in r]):.2f}"
     )
 print(f"all: wp err median {np.median(all_wp):.1f} cm, end err median {np.median(all_end):.1f} cm")
