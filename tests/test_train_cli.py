@@ -83,8 +83,9 @@ def test_every_column_is_one_method_ablation_pair() -> None:
 def test_paper_recipe_is_table_s2_and_recipes_refuse_unknown_fields(tmp_path: Path) -> None:
     paper = load_recipe("paper")
     m, t = paper.model, paper.train
-    assert (m.image_height_px, m.image_width_px, m.demo_frames) == (240, 320, 10)
-    assert (m.attention_layers, m.attention_heads, m.hidden_dim, m.gamma) == (2, 4, 256, 1e-3)
+    assert (m.trunk.image_height_px, m.trunk.image_width_px, m.trunk.demo_frames) == (240, 320, 10)
+    assert (m.trunk.attention_layers, m.trunk.attention_heads, m.trunk.hidden_dim) == (2, 4, 256)
+    assert m.awda["gamma"] == 1e-3
     assert (t.batch_size, t.learning_rate, t.snapshot_every_steps) == (30, 5e-4, 10_000)
     small = load_recipe("small")
     assert small.train.max_steps >= 10 * small.train.snapshot_every_steps  # 10 to evaluate
@@ -116,7 +117,7 @@ def test_a_variant_extends_its_base_and_overrides_only_what_it_names(tmp_path: P
     )
     (tmp_path / "leaf.toml").write_text('extends = "mid.toml"\nname = "leaf"\n')
     leaf = load_recipe(str(tmp_path / "leaf.toml"))
-    assert (leaf.name, leaf.model.dropout, leaf.train.seed) == ("leaf", 0.3, 5)
+    assert (leaf.name, leaf.model.trunk.dropout, leaf.train.seed) == ("leaf", 0.3, 5)
     assert leaf.suite_models == {"metaworld": {"image_height_px": 224, "image_width_px": 200}}
     # a missing base, a cycle and a nameless variant are one-line errors
     (tmp_path / "lost.toml").write_text('extends = "nowhere"\nname = "lost"\n')
@@ -129,6 +130,30 @@ def test_a_variant_extends_its_base_and_overrides_only_what_it_names(tmp_path: P
     (tmp_path / "nameless.toml").write_text('extends = "base.toml"\n')
     with pytest.raises(UsageError, match="needs a name"):
         load_recipe(str(tmp_path / "nameless.toml"))
+
+
+def test_the_model_table_loads_into_the_model_configs(tmp_path: Path) -> None:
+    from dataclasses import asdict
+
+    from awda_bench.models.config import ModelSpec, TrunkConfig
+
+    small = load_recipe("small")
+    assert isinstance(small.model.trunk, TrunkConfig)
+    assert ModelSpec.from_table(small.model.to_table()) == small.model
+    assert set(small.to_dict()["model"]) == {*ModelSpec.table_keys(), *asdict(small.data)}
+    tosvi = small.model.tosvi_config(frame_stack=1, use_depth=True)  # a column's settings
+    assert (tosvi.frame_stack, tosvi.use_depth, tosvi.trunk.head) == (1, True, "self-attention")
+    assert tosvi.feature_pool == small.to_dict()["model"]["tosvi_feature_pool"]
+    for body, message in (
+        ("dropout = 1.5", r"\[model\]: TrunkConfig.dropout = 1.5 is invalid; expected a float"),
+        ("tosvi_feature_pool = 0", r"TosviConfig.feature_pool \(tosvi_feature_pool\) = 0"),
+        ("trajectory_points = 1", r"DataRecipe.trajectory_points = 1 is invalid; expected an int"),
+        ("gammma = 1", r"\[model\] has no field\(s\) \['gammma'\]; valid: image_height_px"),
+    ):
+        bad = tmp_path / "bad.toml"
+        bad.write_text(f'name = "bad"\nsuites = ["pick_place"]\n[model]\n{body}\n')
+        with pytest.raises(UsageError, match=message):
+            load_recipe(str(bad))
 
 
 def test_adm_blends_with_the_partners_first_frame_and_never_touches_labels() -> None:

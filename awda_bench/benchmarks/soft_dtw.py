@@ -98,16 +98,17 @@ def run_soft_dtw_bench(args: argparse.Namespace) -> int:
         torch.set_num_threads(args.threads)
     device = resolve_device(args.device)
     recipe = load_recipe(args.recipe)
-    if args.step and recipe.model.head in CELL_HEADS:
+    if args.step and recipe.model.trunk.head in CELL_HEADS:
         raise UsageError(
             f"--step times a Full-1 step on random images; recipe {recipe.name}'s "
-            f"{recipe.model.head} head votes along its training camera's rays and trains over "
+            f"{recipe.model.trunk.head} head votes along its training camera's rays and trains over "
             "cached features: time its step with `train --recipe ... --steps 20` instead, or drop "
             "--step"
         )
     # the loss's settings only: the identification loss (cell heads) needs a camera and labels
     # that random trajectories do not have, and is not part of the Soft-DTW loss timed here
-    loss_only = replace(recipe, model=replace(recipe.model, identification_weight=0.0))
+    awda = {**recipe.model.awda, "identification_weight": 0.0}
+    loss_only = replace(recipe, model=replace(recipe.model, awda=awda))
     cfg = model_config(loss_only, column_for("awda", None))
     assert isinstance(cfg, AwdaConfig)
     impls = [s for s in args.implementations.split(",") if s] or list(NATIVE[device.type])
@@ -116,7 +117,7 @@ def run_soft_dtw_bench(args: argparse.Namespace) -> int:
         raise UsageError(
             f"unknown soft-DTW implementation(s) {unknown}; choose from {', '.join(IMPLEMENTATIONS)}"
         )
-    b, t = recipe.train.batch_size, recipe.model.trajectory_points
+    b, t = recipe.train.batch_size, recipe.data.trajectory_points
     gen = torch.Generator().manual_seed(0)
     waypoints = torch.randn(b, cfg.total_waypoints, cfg.waypoint_dim, generator=gen)
     trajectory = torch.rand(b, t, cfg.waypoint_dim, generator=gen)

@@ -102,7 +102,7 @@ def config_from_args(args: argparse.Namespace) -> ReproduceConfig:
     if columns is None:
         from awda_bench.training.recipe import load_recipe
 
-        frozen = load_recipe(args.recipe).model.freeze_backbone
+        frozen = load_recipe(args.recipe).model.trunk.freeze_backbone
         columns = "full-1" if frozen else ",".join(DEFAULT_COLUMNS)
     return ReproduceConfig(
         suite=args.suite,

