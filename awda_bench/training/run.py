@@ -422,10 +422,25 @@ def run_training(request: TrainRequest) -> TrainOutcome:
         return _run_training(request)
 
 
-def _run_training(request: TrainRequest) -> TrainOutcome:
-    column = column_for(request.method, request.ablation)
-    recipe = load_recipe(request.recipe).with_schedule(request.steps, request.snapshot_every)
-    device = resolve_device(request.device)
+@dataclass
+class _Sources:
+    """The collections a run reads: the training data and its selection, and where the
+    validation pairs come from (the held-out family of the same data, or ``--val-data``)."""
+
+    data: CollectedData
+    selection: Selection | None = None
+    val_data: CollectedData | None = None
+    val_selection: Selection | None = None
+
+    def close(self) -> None:
+        self.data.close()
+        if self.val_data is not None and self.val_data is not self.data:
+            self.val_data.close()
+
+
+def _open_sources(request: TrainRequest, recipe: Recipe, column: Column) -> tuple[_Sources, Recipe]:
+    """DATA_DIR (and ``--val-data``) opened and checked, with the recipe as it trains on their
+    suite (its ``[suite.<name>.model]`` table applied)."""
     data = open_data(request.data, recipe, column, "--data")
     recipe = recipe.for_suite(str(data.manifest["definition"].get("suite")))
     if data.split != "train":
@@ -433,36 +448,61 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
             f"--data {request.data} is a {data.split!r}-split collection; train on a train split "
             "(a test split is validation data: --val-data)"
         )
-    selection: Selection | None = None
-    val_data: CollectedData | None = None
-    val_selection: Selection | None = None
     if request.hold_out is not None:
         check_hold_out(data, request.hold_out)
-        selection = Selection(exclude_families=(request.hold_out,))
-        val_data, val_selection = data, Selection(families=(request.hold_out,))
-    elif request.val_data is not None:
+        held_out = (request.hold_out,)
+        return _Sources(
+            data, Selection(exclude_families=held_out), data, Selection(families=held_out)
+        ), recipe
+    if request.val_data is not None:
         val_data = open_data(request.val_data, recipe, column, "--val-data")
         if val_data.manifest["definition"].get("suite") != data.manifest["definition"].get("suite"):
             raise UsageError(
                 f"--val-data {request.val_data} is from another suite than --data {request.data}"
             )
-    if request.threads is not None:
-        torch.set_num_threads(request.threads)
+        return _Sources(data, val_data=val_data), recipe
+    return _Sources(data), recipe
+
+
+@dataclass
+class _Samples:
+    """What the loop and the validator read."""
+
+    dataset: SampleDataset
+    """The training samples (served from the feature cache with a frozen backbone)."""
+    train_set: SampleDataset
+    """What the loop draws: ``dataset``, or a one-head column's view of it."""
+    val_dataset: SampleDataset | None
+    """The validation samples, or ``None``."""
+    cameras: dict[str, Any]
+    """The ``camera_*`` fields of an AWDA network (empty for T-OSVI)."""
+
+
+def _make_samples(sources: _Sources, recipe: Recipe, column: Column, progress: bool) -> _Samples:
+    """The datasets, their cameras indexed, cache-served when the backbone is frozen, and their
+    first and last samples read (a damaged file is refused up front)."""
     dataset: SampleDataset = make_dataset(
-        data, recipe, column, selection, synthesized=column.synthesized
+        sources.data, recipe, column, sources.selection, synthesized=column.synthesized
     )
     val_dataset: SampleDataset | None = (
-        make_dataset(val_data, recipe, column, val_selection, synthesized=False, validation=True)
-        if val_data is not None
+        make_dataset(
+            sources.val_data,
+            recipe,
+            column,
+            sources.val_selection,
+            synthesized=False,
+            validation=True,
+        )
+        if sources.val_data is not None
         else None
     )
     cameras: dict[str, Any] = {}
     if isinstance(dataset, AwdaPairDataset):  # before the cache wrappers read "camera"
         assert val_dataset is None or isinstance(val_dataset, AwdaPairDataset)
-        cameras = agent_cameras(data, dataset, val_dataset)
+        cameras = agent_cameras(sources.data, dataset, val_dataset)
     if recipe.model.trunk.freeze_backbone:
         assert isinstance(dataset, AwdaPairDataset | TosviDataset)
-        dataset = with_cached_features(dataset, recipe, request.progress)
+        dataset = with_cached_features(dataset, recipe, progress)
         if isinstance(val_dataset, TosviDataset):
             # only the stacks the validator reads are encoded, not every frame of the validation
             # episodes (the validator then reads all of them: the same samples, the same mean)
@@ -471,7 +511,7 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
                 validation_indices(len(val_dataset), v.batch_size, v.validation_batches, v.seed)
             )
         if isinstance(val_dataset, AwdaPairDataset | TosviDataset):
-            val_dataset = with_cached_features(val_dataset, recipe, request.progress)
+            val_dataset = with_cached_features(val_dataset, recipe, progress)
     train_set: SampleDataset = dataset
     if column.arch == "awda" and column.num_heads == 1:
         train_set = OneHead(dataset)
@@ -479,8 +519,15 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
         if ds is not None:
             ds[0]
             ds[len(ds) - 1]
+    return _Samples(dataset, train_set, val_dataset, cameras)
 
-    record: dict[str, Any] = {
+
+def _training_record(
+    request: TrainRequest, column: Column, recipe: Recipe, sources: _Sources, samples: _Samples
+) -> dict[str, Any]:
+    """What ``train.json`` and every snapshot record (and a resume compares: :func:`identity`)."""
+    data, val_data, val_dataset = sources.data, sources.val_data, samples.val_dataset
+    return {
         "column": {
             "name": column.name,
             "slug": column.slug,
@@ -500,7 +547,7 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
             "split": data.split,
             "image_size": data.manifest["definition"].get("image_size"),
             "jpeg_quality": data.manifest["definition"].get("jpeg_quality"),
-            "samples": len(dataset),
+            "samples": len(samples.dataset),
         },
         "hold_out": request.hold_out,
         "validation": None
@@ -512,13 +559,96 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
             "samples": len(val_dataset),
         },
     }
+
+
+class _Progress:
+    """The loop's callbacks: the logbook, the progress bar, validation (every
+    ``validate_every_steps`` and at every snapshot, once a step) and the learning curve."""
+
+    def __init__(
+        self,
+        request: TrainRequest,
+        column: Column,
+        recipe: Recipe,
+        model: AwdaNet | TosviNet,
+        validator: Validator | None,
+        device: torch.device,
+        outcome: TrainOutcome,
+        title: str,
+    ) -> None:
+        self.request, self.column, self.schedule = request, column, recipe.train
+        self.model, self.validator, self.device = model, validator, device
+        self.outcome, self.title = outcome, title
+        self.state: dict[str, Any] = {}
+
+    def validate(self, step: int) -> None:
+        state = self.state
+        if self.validator is None or state.get("validated") == step:
+            return
+        loss = self.validator(self.model, self.device)
+        state["validated"] = step
+        self.outcome.validation.append((step, loss))
+        state["log"].log(step, "val", {"loss": loss})
+        shown = {"loss": f"{state['loss']:.4g}"} if "loss" in state else {}  # none before step 1
+        state["bar"].set_postfix(**shown, val=f"{loss:.4g}")
+
+    def on_start(self, start: int) -> None:
+        from tqdm import tqdm
+
+        self.state["log"] = Logbook(self.request.out, start)
+        self.state["bar"] = tqdm(
+            total=self.schedule.max_steps,
+            initial=start,
+            disable=not self.request.progress,
+            unit="step",
+            desc=f"train {self.column.slug}",
+            dynamic_ncols=True,
+        )
+        if start == 0:
+            self.validate(0)
+
+    def on_step(self, step: int, info: dict[str, float]) -> None:
+        state, outcome = self.state, self.outcome
+        data_s, compute_s = info.pop("data_s"), info.pop("compute_s")
+        outcome.step_s.append(data_s + compute_s)
+        outcome.data_s.append(data_s)
+        state["loss"] = info["loss"]
+        log: Logbook = state["log"]
+        log.log(step, "train", info)
+        log.log(step, "time", {"data_s": data_s, "compute_s": compute_s})
+        if step % self.schedule.validate_every_steps == 0:
+            self.validate(step)
+        state["bar"].update(1)
+        if "validated" not in state or state["validated"] != step:
+            state["bar"].set_postfix(loss=f"{info['loss']:.4g}", refresh=False)
+
+    def on_snapshot(self, step: int, path: Path) -> None:
+        self.validate(step)
+        self.state["log"].flush()
+        self.outcome.curve = plot_learning_curve(self.request.out, self.title)
+
+    def close(self) -> None:
+        if "log" in self.state:
+            self.state["log"].close()
+            self.state["bar"].close()
+
+
+def _run_training(request: TrainRequest) -> TrainOutcome:
+    column = column_for(request.method, request.ablation)
+    recipe = load_recipe(request.recipe).with_schedule(request.steps, request.snapshot_every)
+    device = resolve_device(request.device)
+    sources, recipe = _open_sources(request, recipe, column)
+    if request.threads is not None:
+        torch.set_num_threads(request.threads)
+    samples = _make_samples(sources, recipe, column, request.progress)
+    record = _training_record(request, column, recipe, sources, samples)
     resuming = check_checkpoint_dir(request.out, record)
     request.out.mkdir(parents=True, exist_ok=True)
     _write_json(request.out / TRAIN_JSON, {**record, "device": device.type})
 
     t = recipe.train
     torch.manual_seed(t.seed)  # initial weights (a resumed run loads them from its snapshot)
-    model = build_model(model_config(recipe, column, cameras or None))
+    model = build_model(model_config(recipe, column, samples.cameras or None))
     config = TrainConfig(
         learning_rate=t.learning_rate,
         batch_size=t.batch_size,
@@ -528,9 +658,10 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
         device=request.device,
         resume=resuming,
     )
+    val_dataset = samples.val_dataset
     validator = (
         Validator(
-            OneHead(val_dataset) if train_set is not dataset else val_dataset,
+            OneHead(val_dataset) if samples.train_set is not samples.dataset else val_dataset,
             t.batch_size,
             t.validation_batches,
             t.seed,
@@ -539,74 +670,24 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
         else None
     )
     outcome = TrainOutcome(column=column, recipe=recipe, result=TrainResult(0, 0), out=request.out)
-    title = f"{column.name} ({column.slug}), recipe {recipe.name}, data {data.fingerprint}" + (
-        f", hold-out {request.hold_out}" if request.hold_out else ""
-    )
-    state: dict[str, Any] = {}
-
-    def validate(step: int) -> None:
-        if validator is None or state.get("validated") == step:
-            return
-        loss = validator(model, device)
-        state["validated"] = step
-        outcome.validation.append((step, loss))
-        state["log"].log(step, "val", {"loss": loss})
-        shown = {"loss": f"{state['loss']:.4g}"} if "loss" in state else {}  # none before step 1
-        state["bar"].set_postfix(**shown, val=f"{loss:.4g}")
-
-    def on_start(start: int) -> None:
-        from tqdm import tqdm
-
-        state["log"] = Logbook(request.out, start)
-        state["bar"] = tqdm(
-            total=t.max_steps,
-            initial=start,
-            disable=not request.progress,
-            unit="step",
-            desc=f"train {column.slug}",
-            dynamic_ncols=True,
-        )
-        if start == 0:
-            validate(0)
-
-    def on_step(step: int, info: dict[str, float]) -> None:
-        data_s, compute_s = info.pop("data_s"), info.pop("compute_s")
-        outcome.step_s.append(data_s + compute_s)
-        outcome.data_s.append(data_s)
-        state["loss"] = info["loss"]
-        log: Logbook = state["log"]
-        log.log(step, "train", info)
-        log.log(step, "time", {"data_s": data_s, "compute_s": compute_s})
-        if step % t.validate_every_steps == 0:
-            validate(step)
-        state["bar"].update(1)
-        if "validated" not in state or state["validated"] != step:
-            state["bar"].set_postfix(loss=f"{info['loss']:.4g}", refresh=False)
-
-    def on_snapshot(step: int, path: Path) -> None:
-        validate(step)
-        state["log"].flush()
-        outcome.curve = plot_learning_curve(request.out, title)
-
+    title = f"{column.name} ({column.slug}), recipe {recipe.name}, data {sources.data.fingerprint}"
+    title += f", hold-out {request.hold_out}" if request.hold_out else ""
+    progress = _Progress(request, column, recipe, model, validator, device, outcome, title)
     try:
         outcome.result = train(
             model,
-            train_set,
+            samples.train_set,
             config,
             request.out,
-            on_step=on_step,
-            on_start=on_start,
-            on_snapshot=on_snapshot,
+            on_step=progress.on_step,
+            on_start=progress.on_start,
+            on_snapshot=progress.on_snapshot,
             transform=BatchTreatment(recipe.augment, adm=column.adm, seed=t.seed),
             training_record=record,
         )
     finally:
-        if "log" in state:
-            state["log"].close()
-            state["bar"].close()
-        data.close()
-        if val_data is not None and val_data is not data:
-            val_data.close()
+        progress.close()
+        sources.close()
     if outcome.result.end_step > outcome.result.start_step:
         outcome.curve = plot_learning_curve(request.out, title)
     return outcome
