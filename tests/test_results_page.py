@@ -125,8 +125,11 @@ def write_index(reports: Path, text: str) -> Path:
 
 
 def _paper_strings() -> set[str]:
+    """The paper's cells that can be told apart from ours: a "mean ± SE" string (Table S4's bare
+    "0" cells would match every number)."""
     values = {v for row in paper_values.PAPER_S3.values() for v in row.values()}
-    return values | set(paper_values.PAPER_S4.values()) | set(paper_values.PAPER_S4_MOSAIC.values())
+    values |= set(paper_values.PAPER_S4.values()) | set(paper_values.PAPER_S4_MOSAIC.values())
+    return {v for v in values if "±" in v}
 
 
 # --- the confidence interval -------------------------------------------------------------------
@@ -267,8 +270,13 @@ def test_paper_values_never_appear_in_our_columns(reports: Path) -> None:
     for key, title in paper_values.S3_COLUMNS:
         assert s3.loc[f"{title} (`{key}`)", "paper"] == paper_values.PAPER_S3_PICK_PLACE[key]
     drawer = page.s4[(page.s4.index == "Drawer") & (page.s4["column"] == "Full-1 (`full-1`)")]
-    assert drawer.iloc[0]["paper: Full-1"] == "0.29 ± 0.033"
-    assert drawer.iloc[0]["paper: MOSAIC [3]"] == "0.15 ± 0.038"
+    assert drawer.iloc[0]["paper: Full-1"] == ".29 ± .033"
+    assert drawer.iloc[0]["paper: MOSAIC [3]"] == ".15 ± .038"
+    every = page.s4[page.s4["column"] == "Full-1 (`full-1`)"]  # Table S4 whole: six families, All
+    assert list(every["paper: Full-1"]) == [".10 ± .02", ".29 ± .033", ".01 ± .005", "0", "0",
+                                            ".02 ± .01", ".07 ± .007"]  # fmt: skip
+    assert list(every["paper: MOSAIC [3]"]) == [".05 ± .018", ".15 ± .038", ".05 ± .018", "0",
+                                                "0", "0", ".04 ± .008"]  # fmt: skip
 
 
 def test_writing_the_page(reports: Path) -> None:

@@ -41,7 +41,6 @@ from awda_bench.reporting.paper_values import (
     S3_COLUMNS,
     S3_DIFFICULTY_GROUPS,
     S3_ROWS,
-    S4_NOT_LEGIBLE,
 )
 from awda_bench.reporting.results_index import (
     ANALYSIS_KEYS,
@@ -766,10 +765,10 @@ class _Builder:
             for key in keys:
                 row = {"column": f"{titles[key]} (`{key}`)", **self._row(by_key[key][family_title])}
                 if key == "full-1":
-                    row[f"{PAPER}: Full-1"] = PAPER_S4.get((key, family), S4_NOT_LEGIBLE)
+                    row[f"{PAPER}: Full-1"] = PAPER_S4[(key, family)]
                 else:
                     row[f"{PAPER}: Full-1"] = f"Table S4 has no {titles[key]} row"
-                row[f"{PAPER}: MOSAIC [3]"] = PAPER_S4_MOSAIC.get(family, S4_NOT_LEGIBLE)
+                row[f"{PAPER}: MOSAIC [3]"] = PAPER_S4_MOSAIC[family]
                 rows.append(row)
                 index.append(family_title)
         columns = ["column", OURS, CI, SIZE, f"{PAPER}: Full-1", f"{PAPER}: MOSAIC [3]", SOURCE]
