@@ -148,6 +148,21 @@ def test_per_task_table_counts_each_tasks_ok_episodes_and_successes(
     assert len(got) == len(rows) > 2
     for method, task, family, n, successes in rows:
         assert got[(method, task)] == (family, n, successes, pytest.approx(successes / n))
+    # each task's reached / grasped over its ok episodes that report the flags (empty: none does)
+    flags = (
+        sqlite3.connect(run_dir / STORE_NAME)
+        .execute(
+            "SELECT method, task, AVG(reached), AVG(grasped) FROM episodes WHERE status = 'ok' "
+            "AND reached IS NOT NULL AND grasped IS NOT NULL GROUP BY method, task"
+        )
+        .fetchall()
+    )
+    assert flags  # the fake env reports them
+    rates = {(r.method, r.task): (r.reached, r.grasped) for r in table.itertuples()}
+    for method, task, reached, grasped in flags:
+        assert rates[(method, task)] == (pytest.approx(reached), pytest.approx(grasped))
+    unflagged = set(rates) - {(m, t) for m, t, _, _ in flags}
+    assert all(pd.isna(rates[k][0]) for k in unflagged)
     # raising fails episode 1 of each task: those rows are not episodes of the table
     assert all(got[("raising", t)][1] == 5 for m, t in got if m == "raising")
     assert "## Success per task" in (tmp_path / "report.md").read_text()

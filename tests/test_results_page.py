@@ -26,6 +26,7 @@ from awda_bench.reporting.results_index import (
 from awda_bench.reporting.results_page import (
     CI,
     FIRST_GRIP,
+    FULL1_GRIP,
     NO_RUN_YET,
     NOT_RECORDED,
     NOT_RUN,
@@ -499,6 +500,21 @@ def test_the_metaworld_rows_group_the_held_out_tasks_by_their_published_difficul
     write_source(
         reports / "learned" / "mw", "metaworld", "full-1", [(10, 20)], families=counts, grasp=None
     )
+    from awda_bench.suites import load_suite
+
+    pick_place_wall = next(
+        t.index for t in load_suite("metaworld").eval_tasks if t.family == "pick-place-wall"
+    )
+    pd.DataFrame(
+        [
+            {
+                "suite": "metaworld", "method": "full-1", "task": pick_place_wall,
+                "family": "pick-place-wall", "episodes": 4, "successes": 0, "rate": 0.0,
+                "reached": 1.0, "grasped": 0.75, "first_grip_target": 0.75,
+                "first_grip_other": 0.0, "first_grip_nothing": 0.25, "first_grip_never": 0.0,
+            }
+        ]
+    ).to_csv(reports / "learned" / "mw" / "per_task.csv", index=False)  # fmt: skip
     index = reports / "results_sources.toml"
     index.write_text(index.read_text() + '\n[metaworld]\nfull-1 = { source = "learned/mw" }\n')
     page = build_results_page(index)
@@ -514,6 +530,10 @@ def test_the_metaworld_rows_group_the_held_out_tasks_by_their_published_difficul
     tasks = page.s3_metaworld_tasks
     assert tasks.loc["pick-place-wall-v3", "difficulty"] == "very_hard"
     assert tasks.loc["window-open-v3", "Full-1 (`full-1`)"] == "0.50 ± 0.25†"
+    # Full-1's episodes task by task: reached, grasped, then where the first grip landed
+    grips = tasks[FULL1_GRIP]
+    assert grips["pick-place-wall-v3"] == "1.00 / 0.75 / 0.75 / 0.00 / 0.25 / 0.00"
+    assert grips["window-open-v3"] == NOT_RECORDED  # per_task.csv has no row for it
     tosvi = page.s3_metaworld.loc["T-OSVI [1] (`tosvi`)"]
     assert (tosvi["ours: Meta-World [all]"], tosvi["note"]) == (NOT_RUN, NO_RUN_YET)
     assert "[hard] = medium, hard, very_hard" in page.markdown()

@@ -223,6 +223,19 @@ FIRST_GRIP_COLUMNS: dict[str, str] = {
 ``_nothing``, ``_never``."""
 
 
+def _grasp_rates(g: pd.DataFrame) -> dict[str, float | None]:
+    """Reached / grasped and the first-grip outcomes' rates over the episodes of ``g`` that report
+    both flags (``None`` where none does; first grip over those that recorded one)."""
+    graspable = g[g["reached"].notna() & g["grasped"].notna()]
+    row: dict[str, float | None] = {}
+    for column in ("reached", "grasped"):
+        row[column] = float(graspable[column].mean()) if len(graspable) else None
+    told = graspable["first_grip"].dropna() if "first_grip" in g else pd.Series(dtype=object)
+    for outcome, column in FIRST_GRIP_COLUMNS.items():
+        row[column] = float((told == outcome).mean()) if len(told) else None
+    return row
+
+
 def grasp_analysis(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
     """Per (suite, method): reached / grasped / success rates over the ok episodes of tasks with a
     grasp target (those whose env reports both flags; in MOSAIC: stack block, basketball, nut
@@ -237,13 +250,11 @@ def grasp_analysis(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
     for (suite, method), g in ok.groupby(["suite", "method"], sort=True):
         graspable = g[g["reached"].notna() & g["grasped"].notna()]
         rows = graspable if len(graspable) else g
+        rates = _grasp_rates(g)
         row = {"suite": suite, "method": method, "episodes": len(rows)}
-        for column in ("reached", "grasped"):
-            row[column] = float(graspable[column].mean()) if len(graspable) else None
+        row |= {"reached": rates["reached"], "grasped": rates["grasped"]}
         row["success"] = float(rows[metric].mean())
-        told = graspable["first_grip"].dropna() if "first_grip" in g else pd.Series(dtype=object)
-        for outcome, column in FIRST_GRIP_COLUMNS.items():
-            row[column] = float((told == outcome).mean()) if len(told) else None
+        row |= {column: rates[column] for column in FIRST_GRIP_COLUMNS.values()}
         row["grasp_wp_spread_cm"] = grasp_waypoint_spread_cm(g)
         out.append(row)
     return pd.DataFrame(
@@ -256,17 +267,24 @@ def grasp_analysis(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
 
 
 def per_task(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
-    """Per (suite, method, task): ok episodes, successes and rate, pooled over snapshots. A MOSAIC
-    family mixes variations that a policy can pass by accident (a random hand shuts a drawer) with
-    ones it cannot: the family's cell alone does not say which it passed."""
+    """Per (suite, method, task): ok episodes, successes and rate, pooled over snapshots, and the
+    task's reached / grasped / first-grip rates (:func:`grasp_analysis`'s, empty where its episodes
+    report none). A MOSAIC family mixes variations that a policy can pass by accident (a random
+    hand shuts a drawer) with ones it cannot: the family's cell alone does not say which it
+    passed; on a grasping task the grip columns say where the episodes stopped."""
     ok = episodes[episodes["status"] == "ok"]
     out = [
         {
             "suite": suite, "method": method, "task": int(task), "family": g["family"].iloc[0],
             "episodes": len(g), "successes": int(g[metric].sum()), "rate": float(g[metric].mean()),
+            **_grasp_rates(g),
         }
         for (suite, method, task), g in ok.groupby(["suite", "method", "task"], sort=True)
     ]  # fmt: skip
     return pd.DataFrame(
-        out, columns=["suite", "method", "task", "family", "episodes", "successes", "rate"]
-    )
+        out,
+        columns=[
+            "suite", "method", "task", "family", "episodes", "successes", "rate", "reached",
+            "grasped", *FIRST_GRIP_COLUMNS.values(),
+        ],
+    )  # fmt: skip

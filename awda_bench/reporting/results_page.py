@@ -68,6 +68,8 @@ NOT_RECORDED = "not recorded"
 """A first-grip cell of a source evaluated before episodes recorded their first grip."""
 FIRST_GRIP = "first grip: target / other / nothing / never"
 """The §S3 analysis column of first-grip rates (:data:`~awda_bench.reporting.aggregate.FIRST_GRIP_COLUMNS`)."""
+FULL1_GRIP = "Full-1: reached / grasped / first grip (target / other / nothing / never)"
+"""The Meta-World task table's breakdown of Full-1's episodes on the tasks that grasp."""
 """What a cell without a source says (its note says why)."""
 
 NO_RUN_YET = "no run yet"
@@ -107,6 +109,8 @@ class ReportDir:
     """per_snapshot.csv."""
     grasp: pd.DataFrame = field(repr=False)
     """grasp.csv."""
+    per_task: pd.DataFrame | None = field(default=None, repr=False)
+    """per_task.csv (``None``: a source written without one)."""
     protocols: dict[str, dict[str, Any]] = field(default_factory=dict)
     """summary.json's evaluation protocols by suite (definition and fingerprint)."""
 
@@ -140,6 +144,11 @@ def read_report_dir(directory: Path, where: str) -> ReportDir:
         cells=cells,
         per_snapshot=pd.read_csv(directory / "per_snapshot.csv"),
         grasp=pd.read_csv(directory / "grasp.csv"),
+        per_task=(
+            pd.read_csv(directory / "per_task.csv")
+            if (directory / "per_task.csv").is_file()
+            else None
+        ),
         protocols=protocols,
     )
 
@@ -679,8 +688,12 @@ class _Builder:
             for key, name in zip(present, columns, strict=True):
                 cell = self.cell(METAWORLD_SUITE, key, family_key(task.family))
                 row[name] = cell.ours() if isinstance(cell, PageCell) else NOT_RUN
+            if "full-1" in present:
+                row[FULL1_GRIP] = self.task_grips(METAWORLD_SUITE, "full-1", task.index)
             rows.append(row)
             index.append(task.name)
+        if "full-1" in present:
+            columns.append(FULL1_GRIP)
         if not present:
             rows = [{"difficulty": "–", NOTE: "no Meta-World source in the index yet"}]
             index = ["–"]
@@ -688,6 +701,23 @@ class _Builder:
         return pd.DataFrame(
             rows, index=pd.Index(index, name="held-out task"), columns=["difficulty", *columns]
         )
+
+    def task_grips(self, suite: str, column: str, task: int) -> str:
+        """``0.97 / 0.97 / 0.97 / 0.00 / 0.04 / 0.00``: reached, grasped and the first-grip rates
+        of ``column``'s episodes of one task from its source's per_task.csv (on a push, reached
+        is the hand at the object and the grip is "never"), :data:`NOT_RECORDED` where the source
+        predates the per-task breakdown."""
+        entry = self.find(suite, column, None)
+        table = None if entry is None else self.report(entry).per_task
+        wanted = ["reached", "grasped", *FIRST_GRIP_COLUMNS.values()]
+        if entry is None or table is None or not set(wanted) <= set(table.columns):
+            return NOT_RECORDED
+        match = table[
+            (table["suite"] == suite) & (table["method"] == entry.label) & (table["task"] == task)
+        ]
+        if match.empty or match.iloc[0][wanted].isna().any():
+            return NOT_RECORDED
+        return " / ".join(f"{float(r):.2f}" for r in match.iloc[0][wanted])
 
     def s3_analysis(self) -> pd.DataFrame:
         rows, index = [], []
