@@ -188,6 +188,33 @@ def test_finished_stages_are_recognized(tmp_path: Path) -> None:
     assert not _plan(tmp_path, columns=("full-1",), steps=20)["train full-1"].done  # type: ignore[attr-defined]
 
 
+def test_a_finished_training_under_other_recipe_settings_is_refused(tmp_path: Path) -> None:
+    """Its snapshots all there, the stage would count as done and ``train``'s own check never run:
+    the old network would be evaluated under today's recipe. The name alone may differ."""
+    from dataclasses import replace
+
+    from awda_bench.training.recipe import load_recipe
+    from awda_bench.training.run import TRAIN_JSON
+
+    data = tmp_path / "data" / "train"
+    _collection_manifest(data, "pick_place", 30)
+    ckpt = tmp_path / "checkpoints" / "full-1"
+    ckpt.mkdir(parents=True)
+    (ckpt / "snapshot-000000010.pt").write_bytes(b"")
+    today = load_recipe("small").for_suite("pick_place")
+
+    def trained_with(recipe) -> None:
+        record = {"column": {"arch": "awda"}, "recipe": recipe.to_dict(),
+                  "data": {"fingerprint": "f"}, "hold_out": None}  # fmt: skip
+        (ckpt / TRAIN_JSON).write_text(json.dumps(record))
+
+    trained_with(replace(today, name="a-copy-of-small"))
+    assert _plan(tmp_path, columns=("full-1",), steps=10)["train full-1"].done  # type: ignore[attr-defined]
+    trained_with(replace(today, train=replace(today.train, learning_rate=1e-3)))
+    with pytest.raises(ProtocolMismatchError, match="train.learning_rate"):
+        _plan(tmp_path, columns=("full-1",), steps=10)
+
+
 def test_leave_one_family_out_runs_can_share_one_collection(tmp_path: Path) -> None:
     """--data: the collection (and its feature cache) of another run directory; every training
     task is in it whatever the hold-out, and train leaves the held-out family out."""

@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from awda_bench.data.config import CollectConfig
-from awda_bench.errors import UnknownChoiceError, UsageError
+from awda_bench.errors import ProtocolMismatchError, UnknownChoiceError, UsageError
 from awda_bench.evaluation.sweep import SweepConfig
 from awda_bench.primitives.config import GRASP_SELECTS
 from awda_bench.reproduce.config import (
@@ -112,6 +112,39 @@ def _collect_remaining(collect: CollectConfig) -> int:
 
     already, planned = collection_progress(collect)
     return planned - already
+
+
+def _check_trained_recipe(ckpt: Path, recipe: Recipe) -> None:
+    """Refuse a checkpoint directory trained under other settings than ``recipe``'s (on the
+    suite): with all its snapshots there, its training stage counts as done and would never run
+    ``train``'s own check, so the old snapshots would be evaluated under today's recipe. The
+    recipe's name is not compared (a copy under another name trains the same network)."""
+    from awda_bench.training.run import TRAIN_JSON, identity
+
+    meta = ckpt / TRAIN_JSON
+    if not meta.is_file():
+        return
+    try:
+        theirs = json.loads(meta.read_text())
+        mine = identity({**theirs, "recipe": recipe.to_dict()})["recipe"]
+        trained = identity(theirs)["recipe"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise UsageError(f"{meta} is unreadable ({exc}); use another --out") from exc
+    mine.pop("name", None)
+    trained.pop("name", None)
+    if mine != trained:
+        differ = sorted(
+            f"{table}.{key}"
+            for table in mine
+            if isinstance(mine[table], dict)
+            for key in mine[table]
+            if mine[table].get(key) != trained.get(table, {}).get(key)
+        )
+        raise ProtocolMismatchError(
+            f"{ckpt} was trained under other recipe settings ({', '.join(differ) or 'its tables'}"
+            f" not as in recipe {recipe.name!r}); reproduce into another --out, or delete that "
+            "directory to train it again"
+        )
 
 
 def _steps_done(ckpt: Path) -> int:
@@ -318,6 +351,7 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             if part not in planned_caches and not built:
                 encode_s += COSTS.encode_frame_s * frames
             planned_caches.add(part)
+        _check_trained_recipe(ckpt, recipe.for_suite(config.suite))
         steps_done = _steps_done(ckpt)
         stages.append(
             Stage(
