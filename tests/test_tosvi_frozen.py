@@ -140,6 +140,23 @@ def test_a_run_recorded_before_tosvi_feature_pool_existed_still_resumes() -> Non
     assert identity({**older, "column": awda["column"]}) == identity(awda)
 
 
+def test_a_tosvi_run_resumes_whatever_the_awda_only_fields_say() -> None:
+    """Meta-World's recipe gained the contact label while a T-OSVI run was under way: T-OSVI
+    reads neither it nor the ray heights, so the run resumes; an AWDA run does not."""
+    from awda_bench.training.recipe import load_recipe
+    from awda_bench.training.run import identity
+
+    today = load_recipe("small").for_suite("metaworld").to_dict()
+    before = json.loads(json.dumps(today))
+    before["model"]["identification_contact"] = False
+    before["model"]["ray_height_offset_m"] = 0.05
+    for arch, resumes in (("tosvi", True), ("tosvi-depth", True), ("awda", False)):
+        column = {"slug": arch, "arch": arch}
+        old, new = ({"column": column, "recipe": r, "data": {"fingerprint": "f"}, "hold_out": None}
+                    for r in (before, today))  # fmt: skip
+        assert (identity(old) == identity(new)) == resumes, arch
+
+
 def test_frozen_backbone_gets_no_gradient_and_no_optimizer_state_depth_resnet_does(
     tmp_path: Path,
 ) -> None:

@@ -42,6 +42,7 @@ from typing import Any
 
 from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
 from awda_bench.models.config import (
+    AWDA_TABLE_FIELDS,
     TOSVI_TABLE_FIELDS,
     ModelSpec,
     check_field,
@@ -77,6 +78,11 @@ class DataRecipe:
 
 TOSVI_ONLY_FIELDS: tuple[str, ...] = tuple(TOSVI_TABLE_FIELDS)
 """``[model]`` fields only T-OSVI networks read (an AWDA run resumes whatever they say)."""
+
+AWDA_ONLY_FIELDS: tuple[str, ...] = (*AWDA_TABLE_FIELDS, *(f.name for f in fields(DataRecipe)))
+"""``[model]`` fields only AWDA networks and their samples read (a T-OSVI run resumes whatever
+they say: a Meta-World recipe that changed its ray heights or identification labels trains the
+same T-OSVI network)."""
 
 
 def model_table(model: ModelSpec, data: DataRecipe) -> dict[str, Any]:

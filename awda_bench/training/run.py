@@ -58,6 +58,7 @@ from awda_bench.training.feature_datasets import (
 from awda_bench.training.logbook import Logbook, plot_learning_curve
 from awda_bench.training.loop import SampleDataset, TrainResult, resolve_device, train
 from awda_bench.training.recipe import (
+    AWDA_ONLY_FIELDS,
     TOSVI_ONLY_FIELDS,
     AugmentRecipe,
     DataRecipe,
@@ -184,7 +185,8 @@ def check_hold_out(data: CollectedData, family: str) -> None:
 def identity(record: dict[str, Any]) -> dict[str, Any]:
     """The part of a ``train.json`` record that must match to resume (schedule excluded). A recipe
     field added after the run started (absent from its record) counts at its default, which is
-    what the run trained with; an AWDA column ignores the T-OSVI-only fields, and the recipe's
+    what the run trained with; an AWDA column ignores the T-OSVI-only fields and a T-OSVI column
+    the AWDA-only ones (:data:`~awda_bench.training.recipe.AWDA_ONLY_FIELDS`), and the recipe's
     ``suites`` list is left out (the data's fingerprint says what the run trains on; Meta-World
     joining the list does not change a pick-and-place run)."""
     recipe = json.loads(json.dumps(record["recipe"]))
@@ -196,9 +198,9 @@ def identity(record: dict[str, Any]) -> dict[str, Any]:
     }
     for table, default in defaults.items():
         recipe[table] = {**default, **recipe.get(table, {})}
-    if record["column"].get("arch") == "awda":
-        for key in TOSVI_ONLY_FIELDS:
-            recipe["model"].pop(key)
+    ignored = TOSVI_ONLY_FIELDS if record["column"].get("arch") == "awda" else AWDA_ONLY_FIELDS
+    for key in ignored:
+        recipe["model"].pop(key)
     for key in _SCHEDULE_KEYS:
         recipe["train"].pop(key, None)
     return {
