@@ -41,7 +41,12 @@ from awda_bench.serving.openpi_schema import (
     server_info,
 )
 from awda_bench.serving.protocol import OPENPI, PROTOCOL, ServerInfo
-from awda_bench.serving.remote_policy import ACTION_DIM, ServedMethod, check_actions
+from awda_bench.serving.remote_policy import (
+    ACTION_DIM,
+    ServedMethod,
+    check_actions,
+    check_still_served,
+)
 from awda_bench.serving.wire import decode, pack_openpi
 
 START_HINT = (
@@ -117,15 +122,7 @@ class OpenpiPolicy:
     # ------------------------------------------------------------------ connection
     def _connect(self) -> ClientConnection:
         connection, metadata, info = _open(self.served.url, self.served.timeout_s)
-        expected = self.served.info
-        if (info.method, info.snapshot) != (expected.method, expected.snapshot):
-            connection.close()
-            raise RemotePolicyError(
-                f"{self._peer} now serves {info.method!r} snapshot {info.snapshot_name} "
-                f"({info.snapshot}); this run evaluates {expected.method!r} snapshot "
-                f"{expected.snapshot_name} ({expected.snapshot}): serve that again, or start a "
-                "new run"
-            )
+        check_still_served(connection, info, self.served.info, self._peer)
         self._metadata = metadata
         self._options = OpenpiOptions.from_metadata(metadata, self._peer)
         return connection

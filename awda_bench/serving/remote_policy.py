@@ -135,6 +135,21 @@ def check_action(action: Any, num_envs: int, peer: str) -> np.ndarray:
     return check_actions(action, peer, lambda s: s == shape, f"{shape} (dx, dy, dz, grip per env)")
 
 
+def check_still_served(
+    connection: ClientConnection, info: ServerInfo, expected: ServerInfo, peer: str
+) -> None:
+    """Close ``connection`` and refuse in one line when the server at ``peer`` now serves another
+    method or snapshot than the run evaluates (``expected``); either protocol's reconnect."""
+    if (info.method, info.snapshot) != (expected.method, expected.snapshot):
+        connection.close()
+        raise RemotePolicyError(
+            f"{peer} now serves {info.method!r} snapshot {info.snapshot_name} "
+            f"({info.snapshot}); this run evaluates {expected.method!r} snapshot "
+            f"{expected.snapshot_name} ({expected.snapshot}): serve that again, or start a "
+            "new run"
+        )
+
+
 class RemotePolicy:
     """A policy played by the server at ``served.url``; named ``name`` in the store."""
 
@@ -153,15 +168,7 @@ class RemotePolicy:
     # ------------------------------------------------------------------ connection
     def _connect(self) -> ClientConnection:
         connection, info = _open(self.served.url, self.served.timeout_s)
-        expected = self.served.info
-        if (info.method, info.snapshot) != (expected.method, expected.snapshot):
-            connection.close()
-            raise RemotePolicyError(
-                f"{self._peer} now serves {info.method!r} snapshot {info.snapshot_name} "
-                f"({info.snapshot}); this run evaluates {expected.method!r} snapshot "
-                f"{expected.snapshot_name} ({expected.snapshot}): serve that again, or start a "
-                "new run"
-            )
+        check_still_served(connection, info, self.served.info, self._peer)
         return connection
 
     def close(self) -> None:
