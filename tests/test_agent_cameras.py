@@ -33,10 +33,11 @@ def _camera(extrinsic: np.ndarray) -> tuple[torch.Tensor, torch.Tensor, tuple[in
     return torch.tensor(K), torch.tensor(extrinsic), (240, 320)
 
 
-def _readout(*extrinsics: np.ndarray) -> CellReadout:
+def _readout(*extrinsics: np.ndarray, offset_m: float = 0.05) -> CellReadout:
     shape = CellHeadShape(
         channels=8, grid=GRID, demo_frames=4, dim=16, dropout=0.0, hidden=32, waypoints=5,
         waypoint_dim=4, num_heads=2, cameras=tuple(_camera(e) for e in extrinsics),
+        offset_m=offset_m,
     )  # fmt: skip
     return CellReadout(shape).eval()
 
@@ -61,6 +62,23 @@ def test_each_sample_votes_on_the_rays_of_its_own_camera() -> None:
         assert float((out[0] - both(x[:1], head[:1])[0]).abs().max()) > 0.05
         # no camera index: every sample on the first camera's rays, as before cameras were listed
         torch.testing.assert_close(both(x, head), table(x, head))
+
+
+def test_a_vote_sits_at_most_offset_m_beside_its_ray() -> None:
+    """A saturated horizontal vote moves the point offset_m off its cell's ray (5 cm unless the
+    config widens it: ray_offset_m), the height untouched."""
+    votes = torch.zeros(1, GRID[0] * GRID[1], 5, 4)
+    votes[..., 1] = 20.0  # dx: tanh -> 1
+    camera = torch.zeros(1, dtype=torch.long)
+    for offset_m in (0.05, 0.25):
+        readout = _readout(TABLE, offset_m=offset_m)
+        on_ray = readout._ray_points(torch.zeros_like(votes), 0, camera)
+        moved = readout._ray_points(votes, 0, camera)
+        shift = moved[..., :3] - on_ray[..., :3]
+        torch.testing.assert_close(shift[..., 0], torch.full_like(shift[..., 0], offset_m))
+        assert float(shift[..., 1:].abs().max()) < 1e-6
+    with pytest.raises(UsageError, match="ray_offset_m"):
+        AwdaConfig(trunk=TrunkConfig(), ray_offset_m=0.0)
 
 
 def test_a_snapshot_from_before_cameras_were_listed_loads() -> None:

@@ -77,6 +77,7 @@ class AwdaNet(nn.Module):
                 num_heads=config.num_heads,
                 cameras=self.ray_cameras,
                 height_offset_m=config.ray_height_offset_m,
+                offset_m=config.ray_offset_m,
             )
             self.grid = shape.grid
             if trunk.head == "demo-pointer":

@@ -9,9 +9,9 @@ cells, per waypoint head::
     v_j(cell) = MLP_j([x(cell), cell x, y])  read as an attributed point (3 + k):
         with cameras:   the point at height z_j + dz(cell) on the ray through the cell's centre
                         of the camera the sample was filmed with (its index, ``camera``), moved
-                        by (dx, dy); |dx|, |dy| <= 5 cm, |dz| <= height_offset_m (5 cm unless
-                        the config says otherwise); z_j a parameter per waypoint, the MLP gives
-                        dz, dx, dy and attributes
+                        by (dx, dy); |dx|, |dy| <= offset_m, |dz| <= height_offset_m (5 cm
+                        each unless the config says otherwise); z_j a parameter per waypoint,
+                        the MLP gives dz, dx, dy and attributes
         without:        the MLP gives xyz and attributes
     waypoint_j = sum over cells of p_j(cell) v_j(cell)
 
@@ -31,7 +31,7 @@ from torch import nn
 
 MAX_OFFSET_M = 0.05
 """Largest horizontal offset [m] a ray vote may take from its ray, and its height from its
-waypoint's."""
+waypoint's, unless the config says otherwise (``offset_m``, ``height_offset_m``)."""
 
 INITIAL_HEIGHT_M = 0.1
 """Every waypoint's height [m, world z] before training (a TCP height above a tabletop)."""
@@ -86,6 +86,8 @@ class CellHeadShape:
     votes."""
     height_offset_m: float = MAX_OFFSET_M
     """How far a ray vote's height may be from its waypoint's height parameter [m]."""
+    offset_m: float = MAX_OFFSET_M
+    """How far a ray vote may move horizontally from its cell's ray [m]."""
 
 
 class CellReadout(nn.Module):
@@ -104,7 +106,7 @@ class CellReadout(nn.Module):
         )
         self.register_buffer("cell_xy", torch.stack((xs, ys), dim=-1).reshape(h * w, 2))
         self.rays = bool(cameras)
-        self.height_offset_m = shape.height_offset_m
+        self.height_offset_m, self.offset_m = shape.height_offset_m, shape.offset_m
         if cameras:
             rays = [cell_rays(k.double(), e.double(), size, grid) for k, e, size in cameras]
             self.register_buffer("ray_origin", torch.stack([o for o, _ in rays]).float())
@@ -136,8 +138,8 @@ class CellReadout(nn.Module):
     def _ray_points(self, votes: torch.Tensor, head: int, camera: torch.Tensor) -> torch.Tensor:
         """Raw votes ``(b, L, N, 3 + k)`` read as (z, dx, dy, attributes) on the rays of each
         sample's ``camera`` ``(b,)`` -> attributed points: a waypoint's height is its own
-        parameter plus at most ``height_offset_m`` (``MAX_OFFSET_M`` unless the config says
-        otherwise) from the cell, so that votes start ordered along the image (a free height per
+        parameter plus at most ``height_offset_m`` from the cell (and the point at most
+        ``offset_m`` off its ray horizontally), so that votes start ordered along the image (a free height per
         cell would scatter them)."""
         height = self.height[head].view(-1, 1)  # (N, 1)
         z = height + self.height_offset_m * torch.tanh(votes[..., :1])
@@ -146,7 +148,7 @@ class CellReadout(nn.Module):
         origin = self.ray_origin[camera][:, None, None, :]  # (b, 1, 1, 3)
         reach = (z - origin[..., 2:3]) / direction[..., 2:3]  # distance along the ray
         point = origin + reach * direction
-        shift = MAX_OFFSET_M * torch.tanh(offset)
+        shift = self.offset_m * torch.tanh(offset)
         point = torch.cat((point[..., :2] + shift, point[..., 2:]), dim=-1)
         return torch.cat((point, attributes), dim=-1)
 

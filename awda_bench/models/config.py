@@ -194,6 +194,11 @@ class AwdaConfig:
     waypoints share their heights across tasks; Meta-World's 45 tasks do not (a button's face at
     ~12 cm, a window's handle at ~20, a goal up to 30 cm in the air), and a waypoint whose height
     is wrong slides along its ray: ``recipes/small.toml`` [suite.metaworld.model]."""
+    ray_offset_m: float = 0.05
+    """Cell heads voting on camera rays: how far [m] a cell's vote may move horizontally off its
+    ray (``cell_readout``). 0.05: a waypoint is where the cells it points at are. Larger lets a
+    waypoint point at an object's cells and sit beside it (a push's approach 10-25 cm in front of
+    a button), where the cells image bare table (recipe-study-metaworld.md, V4)."""
     camera_intrinsic: tuple[float, ...] = ()
     """The agent cameras' 3x3 ``intrinsic_cv``, row-major, one after the other (9 numbers per
     camera), or empty. With cameras the cell heads (``demo-to-scene``, ``demo-pointer``) vote
@@ -266,6 +271,13 @@ class AwdaConfig:
             o,
             "ray_height_offset_m",
             self.ray_height_offset_m,
+            "a float in (0, 1]",
+        )
+        check_field(
+            0.0 < self.ray_offset_m <= 1.0,
+            o,
+            "ray_offset_m",
+            self.ray_offset_m,
             "a float in (0, 1]",
         )
 
@@ -367,6 +379,7 @@ AWDA_TABLE_FIELDS: tuple[str, ...] = (
     "demo_reference_frame",
     "identification_weight",
     "ray_height_offset_m",
+    "ray_offset_m",
     "points_per_segment",
     "gamma",
     "attribute_scale",
