@@ -10,10 +10,10 @@ import torch.nn.functional as F
 
 from awda_bench.errors import UsageError
 from awda_bench.models.awda_net import AwdaNet
-from awda_bench.models.cell_readout import CellHeadShape
+from awda_bench.models.cell_readout import CellHeadShape, HandPath
 from awda_bench.models.config import AwdaConfig, TrunkConfig
 from awda_bench.models.demo_pointer import DemoPointer
-from awda_bench.models.identification_loss import grasp_cells
+from awda_bench.models.identification_loss import demo_frame_points, grasp_cells, hand_loss
 
 K = np.array([[219.66, 0.0, 160.0], [0.0, 219.66, 120.0], [0.0, 0.0, 1.0]])
 E = np.array(
@@ -45,7 +45,7 @@ def test_the_demo_pointer_points_by_content_not_by_place() -> None:
 
     def scores(demo: torch.Tensor, first: torch.Tensor) -> torch.Tensor:
         with torch.no_grad():
-            x, moved, found = head.tokens(demo, first)
+            x, moved, found, _ = head.tokens(demo, first)
             where = (
                 head.readout.where_logits[1](x) + found[..., None] * head.readout.prior_weight[1]
             )
@@ -101,7 +101,7 @@ def test_identification_finds_the_object_of_an_unseen_pairing() -> None:
     opt = torch.optim.Adam(head.parameters(), 3e-3)
     for step in range(150):
         demo, first, demo_cell, first_cell = _scenes(seen, 32, seed=step)
-        _, moved, found = head.tokens(demo, first)
+        _, moved, found, _ = head.tokens(demo, first)
         loss = F.cross_entropy(moved, demo_cell) + F.cross_entropy(found, first_cell)
         opt.zero_grad()
         loss.backward()
@@ -186,3 +186,86 @@ def test_identification_weight_needs_the_pointer_and_a_camera() -> None:
     loss.backward()
     assert model.scene_head is not None
     assert model.scene_head.moved[0].weight.grad is not None  # the what-moved convs learn
+
+
+def test_demo_frame_points_read_the_tcp_at_each_demo_frame() -> None:
+    """Frame i of Td spans the episode as point i (P - 1) / (Td - 1) of the trajectory does."""
+    points = torch.zeros(1, 10, 4)
+    points[0, :, 0] = torch.arange(10, dtype=torch.float32)  # x = the point's index
+    at = demo_frame_points(points, 4)  # frames at points 0, 3, 6, 9
+    torch.testing.assert_close(at[0, :, 0], torch.tensor([0.0, 3.0, 6.0, 9.0]))
+    at = demo_frame_points(points, 7)  # points 0, 1.5, 3, ... interpolated
+    torch.testing.assert_close(at[0, :, 0], torch.arange(7, dtype=torch.float32) * 1.5)
+
+
+def test_the_hand_path_moves_the_demo_hands_path_onto_o1s_object() -> None:
+    """With its weight up, a waypoint's softmax peaks at o_1's object cell shifted by where the
+    demo's hand was relative to the demo's moved object (the phase it attends to); the hand loss
+    labels each demo frame with its TCP's cell and trains the hand convolutions."""
+    torch.manual_seed(0)
+    grid = (6, 8)
+    shape = CellHeadShape(
+        channels=8, grid=grid, demo_frames=3, dim=16, dropout=0.0, hidden=32,
+        waypoints=5, waypoint_dim=4, num_heads=2, hand_path=True,
+    )  # fmt: skip
+    head = DemoPointer(shape).eval()
+    readout = head.readout
+    xy = readout.cell_xy
+    # the demo's hand: at cell 9 while the demo's object is at cell 20; o_1's object at cell 33
+    relative = (xy[9] - xy[20]).expand(1, 3, 2)
+    path = HandPath(relative, xy[33][None])
+    x = torch.zeros(1, 48, 16)
+    with torch.no_grad():
+        readout.path_weight.fill_(50.0)
+        p = readout.where(x, 0, prior=torch.zeros(1, 48), path=path)
+    target = xy[33] + xy[9] - xy[20]
+    want = int((xy - target).square().sum(-1).argmin())
+    assert p[0].argmax(0).tolist() == [want] * 5
+    with pytest.raises(ValueError, match="hand_path"):
+        readout.where(x, 0, prior=torch.zeros(1, 48))
+    # the whole head: the hand logits per demo frame, the loss through them
+    out = head.pointer(torch.randn(2, 3, 8, *grid), torch.randn(2, 8, *grid), torch.zeros(2).long())
+    assert out.hand_logits is not None and out.hand_logits.shape == (2, 3, 48)
+    camera = (torch.tensor(K), torch.tensor(E), (240, 320))
+    demo = torch.zeros(2, 10, 4)
+    demo[:, :, :3] = torch.tensor([-0.1, 0.05, 0.02])
+    loss, info = hand_loss(out.hand_logits, demo, [camera], None, grid)
+    assert info["id_hand"] > 0
+    loss.backward()
+    assert head.hand is not None and head.hand[0].weight.grad is not None
+
+
+def test_the_hand_path_trains_with_the_identification_loss() -> None:
+    camera = {
+        "camera_intrinsic": tuple(K.ravel()),
+        "camera_extrinsic": tuple(E.ravel()),
+        "camera_size": (240, 320),
+    }
+    pointer = TrunkConfig(
+        backbone="efficientnet-lite0", backbone_stride=16, freeze_backbone=True,
+        head="demo-pointer", attention_head_dim=8,
+    )  # fmt: skip
+    with pytest.raises(UsageError, match="demo_hand_path"):
+        AwdaConfig(trunk=pointer, demo_hand_path=True, **camera)  # no identification loss
+    config = AwdaConfig(trunk=pointer, identification_weight=1.0, demo_hand_path=True, **camera)
+    model = AwdaNet(config, load_backbone_weights=False)
+    torch.manual_seed(0)
+    trajectory = torch.zeros(2, 10, 4)
+    trajectory[:, :, :3] = torch.tensor([-0.1, 0.05, 0.02])
+    trajectory[:, 4:, 3] = 1.0
+    batch = {
+        "demo_features": torch.randn(2, 10, 112, 15, 20),
+        "first_frame_features": torch.randn(2, 112, 15, 20),
+        "trajectory": trajectory,
+        "demo_trajectory": trajectory,
+        "head": torch.zeros(2, dtype=torch.long),
+    }
+    loss, info = model.compute_loss(batch)
+    assert info["id_hand"] > 0 and info["id_rows"] == 1.0
+    loss.backward()
+    assert model.scene_head is not None and model.scene_head.readout.path_weight.grad is not None
+    with torch.no_grad():  # inference goes through the path too
+        out = model.forward_features(
+            batch["demo_features"], batch["first_frame_features"], batch["head"]
+        )
+    assert out.shape == (2, 15, 4) and bool(torch.isfinite(out).all())

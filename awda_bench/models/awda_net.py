@@ -39,7 +39,7 @@ from awda_bench.models.config import CELL_HEADS, AwdaConfig
 from awda_bench.models.demo_pointer import DemoPointer, PointerOutput
 from awda_bench.models.demo_to_scene import DemoToScene
 from awda_bench.models.frame_encoder import feature_map_size
-from awda_bench.models.identification_loss import identification_loss
+from awda_bench.models.identification_loss import hand_loss, identification_loss
 from awda_bench.models.trunk import VisualTrunk
 from awda_bench.models.waypoint_loss import multi_waypoint_sdtw_loss, split_waypoint_sets
 
@@ -78,6 +78,7 @@ class AwdaNet(nn.Module):
                 cameras=self.ray_cameras,
                 height_offset_m=config.ray_height_offset_m,
                 offset_m=config.ray_offset_m,
+                hand_path=config.demo_hand_path,
             )
             self.grid = shape.grid
             if trunk.head == "demo-pointer":
@@ -221,6 +222,16 @@ class AwdaNet(nn.Module):
             )
             loss = loss + cfg.identification_weight * found
             info.update(found_info)
+            if pointed.hand_logits is not None:
+                hand, hand_info = hand_loss(
+                    pointed.hand_logits,
+                    batch["demo_trajectory"],
+                    self.ray_cameras,
+                    camera,
+                    self.grid,
+                )
+                loss = loss + cfg.identification_weight * hand
+                info.update(hand_info)
         return loss, {"loss": float(loss.detach()), **info}
 
     def waypoint_sets(self, waypoints: torch.Tensor) -> list[torch.Tensor]:

@@ -15,6 +15,13 @@ cells, per waypoint head::
         without:        the MLP gives xyz and attributes
     waypoint_j = sum over cells of p_j(cell) v_j(cell)
 
+With a demo hand path (``hand_path``: the demo's hand positions relative to the object it moved,
+``r`` ``(Td, 2)`` in the cells' [-1, 1] image coordinates, and o_1's object position ``o``)::
+
+    q_j = o + sum_t softmax(phase_j)_t r_t          where the demo's hand went, moved to o_1's object
+    p_j = softmax over cells of  ... - c_j |cell xy - q_j|^2    (c_j learned per waypoint, from 0)
+    v_j(cell) = MLP_j([x(cell), cell x, y, r_1 .. r_Td])
+
 The rays make the choice learnable: from the first step, moving p_j towards the cells that image a
 point moves the waypoint towards that point (free xyz votes start equal, and the loss then only
 sees their mean). The reference also went through its camera: it predicted image-plane
@@ -24,7 +31,7 @@ coordinates and mapped them to the world with the camera matrix.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 import torch
 from torch import nn
@@ -61,6 +68,15 @@ def cell_rays(
     return -rotation.T @ translation, directions
 
 
+class HandPath(NamedTuple):
+    """The demo's hand path relative to its object, and where o_1's object is (module docstring)."""
+
+    relative: torch.Tensor
+    """``(B, Td, 2)``: the hand in each demo frame minus the moved object, cell coordinates."""
+    anchor: torch.Tensor
+    """``(B, 2)``: o_1's object, cell coordinates ([-1, 1], as ``CellReadout.cell_xy``)."""
+
+
 @dataclass(frozen=True)
 class CellHeadShape:
     """What every cell head (and its readout) is built from."""
@@ -88,6 +104,8 @@ class CellHeadShape:
     """How far a ray vote's height may be from its waypoint's height parameter [m]."""
     offset_m: float = MAX_OFFSET_M
     """How far a ray vote may move horizontally from its cell's ray [m]."""
+    hand_path: bool = False
+    """The readout takes a :class:`HandPath` (module docstring)."""
 
 
 class CellReadout(nn.Module):
@@ -114,9 +132,16 @@ class CellReadout(nn.Module):
             self.height = nn.Parameter(torch.full((num_heads, waypoints), INITIAL_HEIGHT_M))
         self.where_logits = nn.ModuleList(nn.Linear(dim, waypoints) for _ in range(num_heads))
         self.prior_weight = nn.Parameter(torch.zeros(num_heads, waypoints)) if prior else None
+        self.hand_path = shape.hand_path
+        path_inputs = 2 * shape.demo_frames if shape.hand_path else 0
+        if shape.hand_path:
+            self.path_weight = nn.Parameter(torch.zeros(num_heads, waypoints))
+            self.path_phase = nn.Parameter(torch.zeros(num_heads, waypoints, shape.demo_frames))
         self.vote = nn.ModuleList(
             nn.Sequential(
-                nn.Linear(dim + 2, hidden), nn.ReLU(), nn.Linear(hidden, waypoints * waypoint_dim)
+                nn.Linear(dim + 2 + path_inputs, hidden),
+                nn.ReLU(),
+                nn.Linear(hidden, waypoints * waypoint_dim),
             )
             for _ in range(num_heads)
         )
@@ -152,14 +177,29 @@ class CellReadout(nn.Module):
         point = torch.cat((point[..., :2] + shift, point[..., 2:]), dim=-1)
         return torch.cat((point, attributes), dim=-1)
 
-    def where(self, x: torch.Tensor, head: int, prior: torch.Tensor | None = None) -> torch.Tensor:
+    def where(
+        self,
+        x: torch.Tensor,
+        head: int,
+        prior: torch.Tensor | None = None,
+        path: HandPath | None = None,
+    ) -> torch.Tensor:
         """``p_j``: tokens ``(B, L, d)`` of samples of waypoint head ``head`` (and their prior
-        ``(B, L)``) -> ``(B, L, N)``, a softmax over the cells per waypoint."""
+        ``(B, L)``, their hand path) -> ``(B, L, N)``, a softmax over the cells per waypoint."""
         logits = self.where_logits[head](x)
         if (prior is None) != (self.prior_weight is None):
             raise ValueError("a readout built with prior=True takes a prior, and only such a one")
+        if (path is None) == self.hand_path:
+            raise ValueError(
+                "a readout built with hand_path=True takes a path, and only such a one"
+            )
         if prior is not None and self.prior_weight is not None:
             logits = logits + prior[..., None] * self.prior_weight[head]
+        if path is not None:
+            phase = torch.softmax(self.path_phase[head], dim=-1)  # (N, Td)
+            target = path.anchor[:, None] + torch.einsum("nt,btc->bnc", phase, path.relative)
+            apart = (self.cell_xy[None, :, None] - target[:, None]).square().sum(-1)  # (B, L, N)
+            logits = logits - apart * self.path_weight[head]
         return torch.softmax(logits, dim=1)
 
     def forward(
@@ -168,18 +208,27 @@ class CellReadout(nn.Module):
         head: torch.Tensor,
         prior: torch.Tensor | None = None,
         camera: torch.Tensor | None = None,
+        path: HandPath | None = None,
     ) -> torch.Tensor:
         """``camera`` ``(B,)``: each sample's camera index (``None``: all the first)."""
         b, cells = x.shape[:2]
         if camera is None:
             camera = torch.zeros(b, dtype=torch.long, device=x.device)
         values_in = torch.cat((x, self.cell_xy.expand(b, -1, -1)), dim=-1)
+        if path is not None:
+            context = path.relative.flatten(1)[:, None].expand(-1, cells, -1)
+            values_in = torch.cat((values_in, context), dim=-1)
         out = x.new_empty(b, self.waypoints, self.waypoint_dim)
         for i in range(self.num_heads):
             rows = head == i
             if not bool(rows.any()):
                 continue
-            where = self.where(x[rows], i, None if prior is None else prior[rows])  # (b_i, L, N)
+            where = self.where(
+                x[rows],
+                i,
+                None if prior is None else prior[rows],
+                None if path is None else HandPath(path.relative[rows], path.anchor[rows]),
+            )  # (b_i, L, N)
             votes = self.vote[i](values_in[rows]).view(-1, cells, self.waypoints, self.waypoint_dim)
             if self.rays:
                 votes = self._ray_points(votes, i, camera[rows])

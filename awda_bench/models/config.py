@@ -194,6 +194,15 @@ class AwdaConfig:
     waypoints share their heights across tasks; Meta-World's 45 tasks do not (a button's face at
     ~12 cm, a window's handle at ~20, a goal up to 30 cm in the air), and a waypoint whose height
     is wrong slides along its ray: ``recipes/small.toml`` [suite.metaworld.model]."""
+    demo_hand_path: bool = False
+    """``demo-pointer`` head: read where the demonstrator's hand goes *relative to the object it
+    moved* from the demo's frames, and carry that path over to o_1's object (a learned hand
+    softmax per demo frame, supervised like the identification loss by the demo's own TCP
+    projected onto its frames; each waypoint's cell softmax gets a term pulling it towards o_1's
+    object cell shifted by a learned blend of that path, and every cell's vote sees the path).
+    Off: the head has no notion of the demo's motion relative to its object (Meta-World's pushes:
+    recipe-study-metaworld.md, V5). Needs ``identification_weight > 0`` (the hand loss shares
+    its weight)."""
     ray_offset_m: float = 0.05
     """Cell heads voting on camera rays: how far [m] a cell's vote may move horizontally off its
     ray (``cell_readout``). 0.05: a waypoint is where the cells it points at are. Larger lets a
@@ -272,6 +281,13 @@ class AwdaConfig:
             "ray_height_offset_m",
             self.ray_height_offset_m,
             "a float in (0, 1]",
+        )
+        check_field(
+            not self.demo_hand_path or self.identification_weight > 0.0,
+            o,
+            "demo_hand_path",
+            self.demo_hand_path,
+            "false, or true with identification_weight > 0 (head 'demo-pointer', a camera)",
         )
         check_field(
             0.0 < self.ray_offset_m <= 1.0,
@@ -380,6 +396,7 @@ AWDA_TABLE_FIELDS: tuple[str, ...] = (
     "identification_weight",
     "ray_height_offset_m",
     "ray_offset_m",
+    "demo_hand_path",
     "points_per_segment",
     "gamma",
     "attribute_scale",

@@ -34,6 +34,17 @@ Data flow, one sample (``d = attention_heads * attention_head_dim``, ``L = h*w``
               (a_j learned per waypoint, from 0), each cell voting an attributed point on its
               camera ray (:mod:`awda_bench.models.cell_readout`)
 
+With ``demo_hand_path`` (a deviation; ``AwdaConfig.demo_hand_path``)::
+
+    hand:     k_t(cell) = convs over e(demo_t) -> a logit per cell: where the demonstrator's hand is
+              in demo frame t (supervised: its TCP projected onto the frame)
+    path:     r_t = E_softmax(k_t)[cell xy] - E_softmax(m)[cell xy]: the hand relative to the object
+              it moved; o = E_softmax(s)[cell xy], o_1's object
+    the readout pulls each waypoint's softmax towards o + a learned blend of the r_t and lets
+    every vote see r (:class:`awda_bench.models.cell_readout.HandPath`): what a push demo shows
+    is where the hand goes around its object, which appearance and per-cell history cannot carry
+    to a scene whose object stands elsewhere.
+
 The third-person camera is the same for demonstrator and agent (a scene camera), so a cell of a
 demo frame and the same cell of o_1 image the same place on the table. What it keeps from the
 reference: frozen features shared by demo and agent frames, keypoints from a spatial softmax over
@@ -48,7 +59,7 @@ from typing import NamedTuple
 import torch
 from torch import nn
 
-from awda_bench.models.cell_readout import CellHeadShape, CellReadout
+from awda_bench.models.cell_readout import CellHeadShape, CellReadout, HandPath
 
 
 def _mlp(inputs: int, hidden: int, outputs: int, dropout: float) -> nn.Sequential:
@@ -66,6 +77,9 @@ class PointerOutput(NamedTuple):
     """``(B, h*w)``: where in the demo's first frame the demonstrator took something."""
     object_logits: torch.Tensor
     """``(B, h*w)``: which of o_1's cells holds that object."""
+    hand_logits: torch.Tensor | None = None
+    """``(B, Td, h*w)``: where the demonstrator's hand is in each demo frame (``hand_path``
+    heads; ``None`` otherwise)."""
 
 
 class DemoPointer(nn.Module):
@@ -93,6 +107,17 @@ class DemoPointer(nn.Module):
         self.context = nn.Conv2d(dim, dim, kernel_size=3, padding=1)
         self.norm = nn.LayerNorm(dim)
         self.readout = CellReadout(shape, prior=True)
+        self.hand = (
+            nn.Sequential(
+                nn.Conv2d(dim, hidden, kernel_size=1),
+                nn.GELU(),
+                nn.Conv2d(hidden, hidden, kernel_size=3, padding=1),
+                nn.GELU(),
+                nn.Conv2d(hidden, 1, kernel_size=1),
+            )
+            if shape.hand_path
+            else None
+        )
 
     def what_moved(self, demo_cells: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Embedded demo frames ``(B, Td, d, h, w)`` -> the what-moved logits ``(B, h*w)`` and
@@ -104,9 +129,10 @@ class DemoPointer(nn.Module):
 
     def tokens(
         self, demo: torch.Tensor, first: torch.Tensor
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
         """o_1's cell tokens ``(B, h*w, d)`` (what the readout points at), the what-moved logits
-        and the object logits (both ``(B, h*w)``)."""
+        and the object logits (both ``(B, h*w)``), and the embedded demo frames
+        ``(B, Td, d, h, w)``."""
         b, t, c, h, w = demo.shape
         cells = h * w
         demo_cells = self.embed(demo.reshape(b * t, c, h, w)).view(b, t, -1, h, w)
@@ -118,7 +144,22 @@ class DemoPointer(nn.Module):
         found = self.object_cell(torch.cat((scene, scene * g[:, None]), dim=-1))
         x = found + self.place_cell(torch.cat((scene, history), dim=-1))
         x = x + self.context(x.transpose(1, 2).reshape(b, d, h, w)).flatten(2).transpose(1, 2)
-        return self.norm(x), moved, self.object_logit(found)[..., 0]
+        return self.norm(x), moved, self.object_logit(found)[..., 0], demo_cells
+
+    def hand_path(
+        self, demo_cells: torch.Tensor, moved: torch.Tensor, found: torch.Tensor
+    ) -> tuple[HandPath, torch.Tensor]:
+        """The demo's hand path relative to its moved object, o_1's object (module docstring),
+        and the hand logits ``(B, Td, h*w)``."""
+        if self.hand is None:
+            raise ValueError("this head was built without a hand path (CellHeadShape.hand_path)")
+        b, t, d, h, w = demo_cells.shape
+        logits = self.hand(demo_cells.reshape(b * t, d, h, w)).view(b, t, h * w)
+        xy = self.readout.cell_xy  # (L, 2)
+        hand = torch.softmax(logits, dim=-1) @ xy  # (B, Td, 2)
+        start = torch.softmax(moved, dim=-1) @ xy  # (B, 2)
+        anchor = torch.softmax(found, dim=-1) @ xy
+        return HandPath(hand - start[:, None], anchor), logits
 
     def pointer(
         self,
@@ -128,8 +169,12 @@ class DemoPointer(nn.Module):
         camera: torch.Tensor | None = None,
     ) -> PointerOutput:
         """``camera`` ``(B,)``: each sample's camera index (``None``: the first camera)."""
-        x, moved, found = self.tokens(demo, first)
-        return PointerOutput(self.readout(x, head, prior=found, camera=camera), moved, found)
+        x, moved, found, demo_cells = self.tokens(demo, first)
+        if self.hand is None:
+            return PointerOutput(self.readout(x, head, prior=found, camera=camera), moved, found)
+        path, hand = self.hand_path(demo_cells, moved, found)
+        waypoints = self.readout(x, head, prior=found, camera=camera, path=path)
+        return PointerOutput(waypoints, moved, found, hand)
 
     def forward(
         self,

@@ -18,6 +18,8 @@ Rows without a grasp (synthesized trajectories, tasks that never close the gripp
 unless the batch carries contact points (``"contact"``, ``"demo_contact"``: where the hand first
 moves the task's object, :mod:`awda_bench.data.contact_point`; ``DataRecipe.identification_contact``),
 which then label the rows that never grasp: Meta-World's pushes.
+With a demo hand path (``AwdaConfig.demo_hand_path``) a third cross-entropy labels the hand logits
+of every demo frame with the cell of the demonstrator's TCP in that frame (:func:`hand_loss`).
 A deviation from the reference, which trains on the Soft-DTW loss alone; it is stated where it is
 switched on (``AwdaConfig.identification_weight``, the recipe files).
 """
@@ -55,14 +57,63 @@ def grasp_cells(
         touched = ~has_point & (contact[:, 3] > 0.5)
         point = torch.where(touched[:, None], contact[:, :3].to(point), point)
         has_point = has_point | touched
+    cells, ahead = point_cells(point, camera, grid)
+    return cells, has_point & ahead
+
+
+def point_cells(
+    point: torch.Tensor, camera: Camera, grid: tuple[int, int]
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """World points ``(..., 3)`` -> the grid cell each projects into through ``camera``
+    (clamped to the grid) and whether it is in front of the camera, both ``(...)``."""
+    intrinsic, extrinsic, (height, width) = camera
+    point = point.double()
     cam = point @ extrinsic[:, :3].T.to(point) + extrinsic[:, 3].to(point)
     uvw = cam @ intrinsic.T.to(point)
-    ahead = uvw[:, 2] > 1e-6
-    uv = uvw[:, :2] / uvw[:, 2:3].clamp_min(1e-6)
+    ahead = uvw[..., 2] > 1e-6
+    uv = uvw[..., :2] / uvw[..., 2:3].clamp_min(1e-6)
     h, w = grid
-    row = torch.floor(uv[:, 1] * h / height).clamp(0, h - 1).long()
-    col = torch.floor(uv[:, 0] * w / width).clamp(0, w - 1).long()
-    return row * w + col, has_point & ahead
+    row = torch.floor(uv[..., 1] * h / height).clamp(0, h - 1).long()
+    col = torch.floor(uv[..., 0] * w / width).clamp(0, w - 1).long()
+    return row * w + col, ahead
+
+
+def demo_frame_points(demo_trajectory: torch.Tensor, demo_frames: int) -> torch.Tensor:
+    """The demonstrator's TCP ``(B, Td, 3)`` at its ``demo_frames`` frames, read off its
+    trajectory ``(B, P, 3 + k)``: both span the episode evenly (the frames at
+    round(linspace(0, T, Td)), the points at linspace(0, T, P)), so frame i sits at point
+    i (P - 1) / (Td - 1), interpolated linearly."""
+    points = demo_trajectory.shape[1]
+    where = torch.linspace(0.0, points - 1.0, demo_frames, device=demo_trajectory.device)
+    low = where.floor().long().clamp(max=points - 1)
+    high = (low + 1).clamp(max=points - 1)
+    frac = (where - low.to(where))[None, :, None].to(demo_trajectory)
+    xyz = demo_trajectory[..., :3]
+    return xyz[:, low] * (1 - frac) + xyz[:, high] * frac
+
+
+def hand_loss(
+    hand_logits: torch.Tensor,
+    demo_trajectory: torch.Tensor,
+    cameras: Sequence[Camera],
+    camera: torch.Tensor | None,
+    grid: tuple[int, int],
+) -> tuple[torch.Tensor, dict[str, float]]:
+    """Cross-entropy of the demo-pointer's hand logits ``(B, Td, h*w)`` onto the cell of the
+    demonstrator's TCP in each demo frame (:func:`demo_frame_points`, projected through each
+    row's camera), over the (row, frame) pairs in front of the camera."""
+    b, frames, cells = hand_logits.shape
+    points = demo_frame_points(demo_trajectory, frames)
+    index = torch.zeros(b, dtype=torch.long) if camera is None else camera.cpu()
+    labels = torch.zeros(b, frames, dtype=torch.long, device=hand_logits.device)
+    ok = torch.zeros(b, frames, dtype=torch.bool, device=hand_logits.device)
+    for i in torch.unique(index).tolist():
+        rows = (index == i).to(hand_logits.device)
+        labels[rows], ok[rows] = point_cells(points[rows], cameras[i], grid)
+    if not bool(ok.any()):
+        return hand_logits.sum() * 0.0, {"id_hand": 0.0}
+    loss = F.cross_entropy(hand_logits[ok], labels[ok])
+    return loss, {"id_hand": float(loss.detach())}
 
 
 def grasp_cells_per_camera(
