@@ -9,7 +9,8 @@ import pytest
 import torch
 
 from awda_bench.envs.basketball import BALLS, HOOPS, BallSpec, BasketballLayout
-from awda_bench.envs.static_props import HoopSpec, sample_separated_xy
+from awda_bench.envs.layouts import sample_separated_xy
+from awda_bench.envs.static_props import HoopSpec
 from awda_bench.episode import EpisodeContext, EpisodeSpec
 from awda_bench.experts.basketball import BasketballExpert, BasketballExpertConfig
 

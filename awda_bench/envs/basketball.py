@@ -15,12 +15,12 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.actor import Actor
 from mani_skill.utils.structs.pose import Pose
 
+from awda_bench.envs.layouts import sample_separated_xy
 from awda_bench.envs.static_props import (
     RGBA,
     HoopSpec,
     build_hoop,
     material,
-    sample_separated_xy,
 )
 from awda_bench.envs.task_base import AWDATaskEnv
 

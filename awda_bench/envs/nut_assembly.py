@@ -15,13 +15,13 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.actor import Actor
 from mani_skill.utils.structs.pose import Pose
 
+from awda_bench.envs.layouts import sample_separated_xy
 from awda_bench.envs.static_props import (
     RGBA,
     PegSpec,
     add_box,
     add_square_ring,
     build_peg,
-    sample_separated_xy,
 )
 from awda_bench.envs.task_base import AWDATaskEnv
 

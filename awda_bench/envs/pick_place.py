@@ -12,6 +12,7 @@ from mani_skill.utils.structs.pose import Pose
 
 from awda_bench.envs.bins import BinSpec, build_bin
 from awda_bench.envs.embodiments import AGENT_UID
+from awda_bench.envs.layouts import first_separated_layout
 from awda_bench.envs.objects import (
     PICK_PLACE_OBJECTS,
     ObjectSpec,
@@ -116,16 +117,13 @@ class PickPlaceEnv(AWDATaskEnv):
         half = torch.tensor(lay.spawn_half_size_m, device=self.device)
         center = torch.tensor(lay.source_bin.center_xy_m, device=self.device)
         xy = (torch.rand((b, m, k, 2), device=self.device) * 2 - 1) * half + center
-        d = torch.linalg.norm(xy[:, :, :, None, :] - xy[:, :, None, :, :], dim=-1)
-        d = d + torch.eye(k, device=self.device) * 1e3
-        ok = d.flatten(2).min(dim=2).values >= lay.min_separation_m
-        if not bool(ok.any(dim=1).all()):
+        layout = first_separated_layout(xy, lay.min_separation_m)
+        if layout is None:
             raise RuntimeError(
                 f"no layout with objects {lay.min_separation_m} m apart among {m} candidates; "
                 "enlarge spawn_half_size_m or layout_candidates"
             )
-        first = ok.to(torch.int8).argmax(dim=1)
-        return xy[torch.arange(b, device=self.device), first]
+        return layout
 
     def _initialize_task(self, env_idx: torch.Tensor, variation: torch.Tensor) -> None:
         b = len(env_idx)

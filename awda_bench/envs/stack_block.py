@@ -20,6 +20,7 @@ from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.actor import Actor
 from mani_skill.utils.structs.pose import Pose
 
+from awda_bench.envs.layouts import first_separated_layout
 from awda_bench.envs.objects import ObjectSpec, build_object, distance_to_objects
 from awda_bench.envs.task_base import AWDATaskEnv
 
@@ -121,21 +122,18 @@ class StackBlockEnv(AWDATaskEnv):
         half = torch.tensor(lay.spawn_half_size_m, device=self.device)
         center = torch.tensor(lay.spawn_center_xy_m, device=self.device)
         xy = (torch.rand((b, m, k, 2), device=self.device) * 2 - 1) * half + center
-        d = torch.linalg.norm(xy[:, :, :, None, :] - xy[:, :, None, :, :], dim=-1)
-        d = d + torch.eye(k, device=self.device) * 1e3
         (x_lo, x_hi), (y_lo, y_hi) = lay.hidden_box_xy_m
         hidden = (
             (xy[..., 0] > x_lo) & (xy[..., 0] < x_hi) & (xy[..., 1] > y_lo) & (xy[..., 1] < y_hi)
         )
-        ok = (d.flatten(2).min(dim=2).values >= lay.min_separation_m) & ~hidden.any(dim=2)
-        if not bool(ok.any(dim=1).all()):
+        layout = first_separated_layout(xy, lay.min_separation_m, allowed=~hidden.any(dim=2))
+        if layout is None:
             raise RuntimeError(
                 f"no layout with cubes {lay.min_separation_m} m apart, none hidden, among {m} "
                 "candidates; "
                 "enlarge spawn_half_size_m or layout_candidates"
             )
-        first = ok.to(torch.int8).argmax(dim=1)
-        return xy[torch.arange(b, device=self.device), first]
+        return layout
 
     def _initialize_task(self, env_idx: torch.Tensor, variation: torch.Tensor) -> None:
         b = len(env_idx)

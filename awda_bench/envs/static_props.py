@@ -1,4 +1,4 @@
-"""Procedural props shared by the MOSAIC-style tasks: basketball hoops, pegs, ring shapes, layouts.
+"""Procedural props shared by the MOSAIC-style tasks: basketball hoops, pegs, ring shapes.
 
 Everything is built from boxes (and one flat cylinder) on ManiSkill's actor builder, one actor per
 parallel scene, no downloaded assets. Frames: world, table top at z = 0, x away from the robot,
@@ -20,7 +20,6 @@ import math
 from dataclasses import dataclass
 
 import sapien
-import torch
 from mani_skill.envs.scene import ManiSkillScene
 from mani_skill.utils.building.actor_builder import ActorBuilder
 from mani_skill.utils.structs.actor import Actor
@@ -263,39 +262,3 @@ def build_peg(scene: ManiSkillScene, spec: PegSpec, name: str) -> Actor:
     add_box(builder, (0.0, 0.0, t + spec.height_m / 2), (w, w, spec.height_m / 2), spec.color)
     builder.initial_pose = sapien.Pose(p=[spec.center_xy_m[0], spec.center_xy_m[1], 0.0])
     return builder.build_static(name=name)
-
-
-# ------------------------------------------------------------------------------------- layouts
-def sample_separated_xy(
-    batch: int,
-    count: int,
-    *,
-    center_xy_m: tuple[float, float],
-    half_size_m: tuple[float, float],
-    min_separation_m: float,
-    min_abs_y_m: float = 0.0,
-    candidates: int = 2048,
-    device: torch.device | str = "cpu",
-) -> torch.Tensor:
-    """(batch, count, 2) points uniform in ``center +- half_size`` [m], pairwise at least
-    ``min_separation_m`` apart (whole-layout rejection: the first valid of ``candidates`` draws
-    per env). With ``min_abs_y_m > 0`` the band ``|y - center_y| < min_abs_y_m`` is left empty
-    (two side areas; the robot's rest pose hides the middle from the third-person camera).
-    Uses the global torch generator (seeded by the env's ``reset(seed)``)."""
-    if not 0.0 <= min_abs_y_m < half_size_m[1]:
-        raise ValueError(f"min_abs_y_m must be in [0, {half_size_m[1]}), got {min_abs_y_m}")
-    u = torch.rand((batch, candidates, count, 2), device=device) * 2 - 1
-    x = center_xy_m[0] + u[..., 0] * half_size_m[0]
-    sign = torch.where(u[..., 1] >= 0, 1.0, -1.0)
-    y = center_xy_m[1] + sign * (min_abs_y_m + u[..., 1].abs() * (half_size_m[1] - min_abs_y_m))
-    xy = torch.stack([x, y], dim=-1)
-    d = torch.linalg.norm(xy[:, :, :, None, :] - xy[:, :, None, :, :], dim=-1)
-    d = d + torch.eye(count, device=device) * 1e3
-    ok = d.flatten(2).min(dim=2).values >= min_separation_m
-    if not bool(ok.any(dim=1).all()):
-        raise RuntimeError(
-            f"no layout with {count} points {min_separation_m} m apart among {candidates} "
-            "candidates; enlarge the spawn area or the candidate count"
-        )
-    first = ok.to(torch.int8).argmax(dim=1)
-    return xy[torch.arange(batch, device=device), first]
