@@ -13,9 +13,8 @@ import sapien
 import torch
 from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.actor import Actor
-from mani_skill.utils.structs.pose import Pose
 
-from awda_bench.envs.layouts import sample_separated_xy
+from awda_bench.envs.layouts import place_upright, sample_separated_xy
 from awda_bench.envs.static_props import (
     RGBA,
     HoopSpec,
@@ -192,16 +191,7 @@ class BasketballEnv(AWDATaskEnv):
             device=self.device,
         )
         yaw = torch.rand((b, len(self.balls)), device=self.device) * 2 * torch.pi
-        for j, (ball, spec) in enumerate(zip(self.balls, lay.balls, strict=True)):
-            p = torch.zeros((b, 3), device=self.device)
-            p[:, :2] = xy[:, j]
-            p[:, 2] = spec.rest_height_m
-            q = torch.zeros((b, 4), device=self.device)
-            q[:, 0] = torch.cos(yaw[:, j] / 2)
-            q[:, 3] = torch.sin(yaw[:, j] / 2)
-            ball.set_pose(Pose.create_from_pq(p, q))
-            ball.set_linear_velocity(torch.zeros((b, 3), device=self.device))
-            ball.set_angular_velocity(torch.zeros((b, 3), device=self.device))
+        place_upright(self.balls, xy, [spec.rest_height_m for spec in lay.balls], yaw)
 
     # ------------------------------------------------------------------ task state
     @property

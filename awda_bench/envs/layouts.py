@@ -1,4 +1,4 @@
-"""Random table-top layouts: where a task's loose objects start, and putting them there.
+"""Random table-top layouts: where a task's loose objects start, and putting them there at rest.
 
 Positions are drawn by whole-layout rejection: per env, many candidate layouts (every object's
 position at once) are drawn in one batch and the first whose positions are pairwise far enough
@@ -8,7 +8,11 @@ ManiSkill seeds from ``reset(seed=...)``. Frames: world, table top at z = 0.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import torch
+from mani_skill.utils.structs.actor import Actor
+from mani_skill.utils.structs.pose import Pose
 
 
 def first_separated_layout(
@@ -58,3 +62,21 @@ def sample_separated_xy(
             "candidates; enlarge the spawn area or the candidate count"
         )
     return layout
+
+
+def place_upright(
+    actors: Sequence[Actor], xy: torch.Tensor, z_m: Sequence[float], yaw_rad: torch.Tensor
+) -> None:
+    """Put ``actors[j]`` at rest at ``(xy[:, j], z_m[j])`` [m], upright, turned by
+    ``yaw_rad[:, j]`` [rad] about the vertical (``xy``: (b, k, 2); ``yaw_rad``: (b, k))."""
+    b = len(xy)
+    for j, (actor, z) in enumerate(zip(actors, z_m, strict=True)):
+        p = torch.zeros((b, 3), device=xy.device)
+        p[:, :2] = xy[:, j]
+        p[:, 2] = z
+        q = torch.zeros((b, 4), device=xy.device)
+        q[:, 0] = torch.cos(yaw_rad[:, j] / 2)
+        q[:, 3] = torch.sin(yaw_rad[:, j] / 2)
+        actor.set_pose(Pose.create_from_pq(p, q))
+        actor.set_linear_velocity(torch.zeros((b, 3), device=xy.device))
+        actor.set_angular_velocity(torch.zeros((b, 3), device=xy.device))

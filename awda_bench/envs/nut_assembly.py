@@ -13,9 +13,8 @@ import sapien
 import torch
 from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.actor import Actor
-from mani_skill.utils.structs.pose import Pose
 
-from awda_bench.envs.layouts import sample_separated_xy
+from awda_bench.envs.layouts import place_upright, sample_separated_xy
 from awda_bench.envs.static_props import (
     RGBA,
     PegSpec,
@@ -242,16 +241,7 @@ class NutAssemblyEnv(AWDATaskEnv):
             device=self.device,
         )
         yaw = (torch.rand((b, len(self.nuts)), device=self.device) * 2 - 1) * lay.max_yaw_rad
-        for j, (nut, spec) in enumerate(zip(self.nuts, lay.nuts, strict=True)):
-            p = torch.zeros((b, 3), device=self.device)
-            p[:, :2] = xy[:, j]
-            p[:, 2] = spec.height_m / 2
-            q = torch.zeros((b, 4), device=self.device)
-            q[:, 0] = torch.cos(yaw[:, j] / 2)
-            q[:, 3] = torch.sin(yaw[:, j] / 2)
-            nut.set_pose(Pose.create_from_pq(p, q))
-            nut.set_linear_velocity(torch.zeros((b, 3), device=self.device))
-            nut.set_angular_velocity(torch.zeros((b, 3), device=self.device))
+        place_upright(self.nuts, xy, [spec.height_m / 2 for spec in lay.nuts], yaw)
 
     # ------------------------------------------------------------------ task state
     @property

@@ -8,11 +8,10 @@ from typing import Any
 import numpy as np
 import torch
 from mani_skill.utils.registration import register_env
-from mani_skill.utils.structs.pose import Pose
 
 from awda_bench.envs.bins import BinSpec, build_bin
 from awda_bench.envs.embodiments import AGENT_UID
-from awda_bench.envs.layouts import first_separated_layout
+from awda_bench.envs.layouts import first_separated_layout, place_upright
 from awda_bench.envs.objects import (
     PICK_PLACE_OBJECTS,
     ObjectSpec,
@@ -130,16 +129,7 @@ class PickPlaceEnv(AWDATaskEnv):
         xy = self._sample_layouts(b)
         yaw = torch.rand((b, len(self.objects)), device=self.device) * 2 * np.pi
         floor = self.layout.source_bin.floor_z_m
-        for j, (actor, spec) in enumerate(zip(self.objects, self.objects_spec, strict=True)):
-            p = torch.zeros((b, 3))
-            p[:, :2] = xy[:, j]
-            p[:, 2] = floor + spec.half_height_m
-            q = torch.zeros((b, 4))
-            q[:, 0] = torch.cos(yaw[:, j] / 2)
-            q[:, 3] = torch.sin(yaw[:, j] / 2)
-            actor.set_pose(Pose.create_from_pq(p, q))
-            actor.set_linear_velocity(torch.zeros((b, 3)))
-            actor.set_angular_velocity(torch.zeros((b, 3)))
+        place_upright(self.objects, xy, [floor + s.half_height_m for s in self.objects_spec], yaw)
 
     # ------------------------------------------------------------------ task state
     @property

@@ -18,9 +18,8 @@ import numpy as np
 import torch
 from mani_skill.utils.registration import register_env
 from mani_skill.utils.structs.actor import Actor
-from mani_skill.utils.structs.pose import Pose
 
-from awda_bench.envs.layouts import first_separated_layout
+from awda_bench.envs.layouts import first_separated_layout, place_upright
 from awda_bench.envs.objects import ObjectSpec, build_object, distance_to_objects
 from awda_bench.envs.task_base import AWDATaskEnv
 
@@ -139,16 +138,7 @@ class StackBlockEnv(AWDATaskEnv):
         b = len(env_idx)
         xy = self._sample_layouts(b)
         yaw = torch.rand((b, len(self.cubes))) * (np.pi / 2)
-        for j, (cube, spec) in enumerate(zip(self.cubes, self.cube_specs, strict=True)):
-            p = torch.zeros((b, 3))
-            p[:, :2] = xy[:, j]
-            p[:, 2] = spec.half_height_m
-            q = torch.zeros((b, 4))
-            q[:, 0] = torch.cos(yaw[:, j] / 2)
-            q[:, 3] = torch.sin(yaw[:, j] / 2)
-            cube.set_pose(Pose.create_from_pq(p, q))
-            cube.set_linear_velocity(torch.zeros((b, 3)))
-            cube.set_angular_velocity(torch.zeros((b, 3)))
+        place_upright(self.cubes, xy, [spec.half_height_m for spec in self.cube_specs], yaw)
 
     # ------------------------------------------------------------------ task state
     @property
