@@ -28,6 +28,7 @@ from awda_bench.reproduce.config import (
 from awda_bench.reproduce.costs import COSTS, clock
 
 if TYPE_CHECKING:
+    from awda_bench.suites import Suite
     from awda_bench.training.recipe import Recipe
 
 
@@ -241,10 +242,8 @@ def _eval_stage(key: str, evaluate: SweepConfig, left: int, arch: str, detail: s
     return Stage(f"evaluate {key}", _run_argv(evaluate), estimate, left == 0, detail, evaluate)
 
 
-def plan_stages(config: ReproduceConfig) -> list[Stage]:
-    """The pipeline for ``config``, each stage marked done or not (nothing runs here)."""
-    from awda_bench.suites import load_suite
-
+def _check_config(config: ReproduceConfig) -> None:
+    """One-line errors for a suite, worker count, grasp rule or hold-out ``reproduce`` cannot run."""
     if config.suite not in SUITES:
         raise UnknownChoiceError("suite", config.suite, SUITES)
     if config.workers < 1:
@@ -261,13 +260,43 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             f"--hold-out is for --suite mosaic; {config.suite} holds out the tasks its suite file "
             "names (pick_place: 14 and 15); drop --hold-out"
         )
-    suite = load_suite(config.suite)
-    out = config.out
-    data, test = train_data(config), out / "data" / "test"
-    quiet = _quiet(config.progress)
-    stages: list[Stage] = []
-    from awda_bench.data.plan import split_tasks
 
+
+@dataclass(frozen=True)
+class _Plan:
+    """What every stage of one ``reproduce`` plan reads (:func:`plan_stages`)."""
+
+    config: ReproduceConfig
+    suite: Suite
+    recipe: Recipe
+    data: Path
+    """The training collection."""
+    val: list[str]
+    """``train``'s ``--val-data`` arguments (none with a hold-out family)."""
+    synthesize: int
+    n_train: int
+    """Episodes of the training collection, synthesized ones included."""
+    target: int
+    """Training steps."""
+    tasks: list[int]
+    """``run --task`` restriction (empty: the suite's evaluation tasks)."""
+    units: int
+    """Evaluation units: held-out tasks or families."""
+    episodes: int
+    """Episodes per unit."""
+
+    @property
+    def runs(self) -> Path:
+        return self.config.out / "runs"
+
+
+def _collect_stages(config: ReproduceConfig, suite: Suite) -> tuple[list[Stage], _Plan]:
+    """The training collection's stage and, without a hold-out family, the validation one's;
+    and the plan the later stages read."""
+    from awda_bench.data.plan import split_tasks
+    from awda_bench.training.recipe import load_recipe
+
+    data, test = train_data(config), config.out / "data" / "test"
     synthesize = (
         default_synthesize(config.suite) if config.synthesize is None else config.synthesize
     )
@@ -277,12 +306,12 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         episodes_per_task=config.demos_per_task, synthesize=synthesize, out=data,
         workers=config.workers, progress=config.progress,
     )  # fmt: skip
-    stages.append(
+    stages = [
         _collect_stage(
             "collect train", collect_train, n_train, "episodes",
             _collection_done(data, "train", config.demos_per_task, synthesize),
         )
-    )  # fmt: skip
+    ]  # fmt: skip
     val: list[str] = []
     if config.hold_out is None:
         n_test = len(suite.eval_tasks) * config.val_episodes_per_task * 2
@@ -299,125 +328,154 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
         )  # fmt: skip
         val = ["--val-data", str(test)]
     target = train_target(config.recipe, config.steps)
-    from awda_bench.training.recipe import load_recipe
-
     recipe = load_recipe(config.recipe)
-    frozen = recipe.model.trunk.freeze_backbone
-    factor = COSTS.paper_step_factor if config.recipe == "paper" else 1.0
     tasks, units = _eval_tasks(config.suite, config.hold_out)
-    episodes = config.episodes if config.episodes is not None else suite.episodes_per_task
-    runs = out / "runs"
-    trained_keys = [k for k in config.columns if k not in EVAL_VARIANTS]
-    planned_caches: set[str] = set()  # feature caches an earlier column of this plan encodes
-    for key in trained_keys:
-        column = COLUMN_KEYS[key]
-        ckpt = out / "checkpoints" / key
-        argv = [
-            "train", "--method", column.method, "--data", str(data), "--out", str(ckpt),
-            "--recipe", config.recipe, *val, *quiet,
-        ]  # fmt: skip
-        if column.ablation is not None:
-            argv += ["--ablation", column.ablation]
-        if config.hold_out is not None:
-            argv += ["--hold-out", config.hold_out]
-        if config.steps is not None:
-            argv += ["--steps", str(config.steps)]
-        if config.threads is not None:
-            argv += ["--threads", str(config.threads)]
-        step_s, encode_s = COSTS.train_step_s[column.arch] * factor, 0.0
-        pairs = (n_train - synthesize) / 2
-        # frames to encode into the cache: (part, frames), the synthesized episodes' own part
-        parts: list[tuple[str, float]] = []
-        cache_kind = "awda" if column.arch == "awda" else "tosvi"  # T-OSVI-style nets share one
-        if frozen and column.arch == "awda":  # cached features; the cache is encoded once
-            step_s = COSTS.frozen_step_s
-            # o_1 of every agent episode, the demo frames of every demonstrator and synthesized one
-            parts = [(cache_kind, pairs * 11), (f"{cache_kind}+synthesized", synthesize * 10)]
-        elif frozen:  # T-OSVI over cached (pooled) maps: every agent frame is encoded once
-            from awda_bench.training.run import frame_stack_of
+    plan = _Plan(
+        config=config, suite=suite, recipe=recipe, data=data, val=val, synthesize=synthesize,
+        n_train=n_train, target=target, tasks=tasks, units=units,
+        episodes=config.episodes if config.episodes is not None else suite.episodes_per_task,
+    )  # fmt: skip
+    return stages, plan
 
-            one_frame = frame_stack_of(recipe, column) == 1
-            step_s = COSTS.frozen_tosvi_one_frame_step_s if one_frame else (
-                COSTS.frozen_tosvi_step_s[column.arch]
-            )  # fmt: skip
-            parts = [
-                (cache_kind, pairs * (COSTS.agent_episode_steps + 10)),
-                (f"{cache_kind}+synthesized", synthesize * COSTS.synthesized_episode_frames),
-            ]
-        if not column.synthesized:
-            parts = parts[:1]
-        for part, frames in parts:
-            built = _cache_built(data, recipe, column.arch, synthesized=part != cache_kind)
-            if part not in planned_caches and not built:
-                encode_s += COSTS.encode_frame_s * frames
-            planned_caches.add(part)
-        _check_trained_recipe(ckpt, recipe.for_suite(config.suite))
-        steps_done = _steps_done(ckpt)
-        stages.append(
-            Stage(
-                f"train {key}",
-                argv,
-                max(0, target - steps_done) * step_s + (encode_s if steps_done == 0 else 0.0),
-                steps_done >= target,
-                f"{column.name}: {target} steps"
-                + (f", resumes at {steps_done}" if 0 < steps_done < target else ""),
-            )
+
+def _train_argv(plan: _Plan, key: str, ckpt: Path) -> list[str]:
+    """``train``'s command for column ``key`` into ``ckpt``."""
+    config, column = plan.config, COLUMN_KEYS[key]
+    argv = [
+        "train", "--method", column.method, "--data", str(plan.data), "--out", str(ckpt),
+        "--recipe", config.recipe, *plan.val, *_quiet(config.progress),
+    ]  # fmt: skip
+    if column.ablation is not None:
+        argv += ["--ablation", column.ablation]
+    if config.hold_out is not None:
+        argv += ["--hold-out", config.hold_out]
+    if config.steps is not None:
+        argv += ["--steps", str(config.steps)]
+    if config.threads is not None:
+        argv += ["--threads", str(config.threads)]
+    return argv
+
+
+def _train_costs(plan: _Plan, key: str, planned_caches: set[str]) -> tuple[float, float]:
+    """Seconds per training step of column ``key`` and seconds to encode the feature-cache parts
+    it needs that neither exist nor an earlier column of this plan encodes (added to
+    ``planned_caches``)."""
+    column = COLUMN_KEYS[key]
+    factor = COSTS.paper_step_factor if plan.config.recipe == "paper" else 1.0
+    step_s, encode_s = COSTS.train_step_s[column.arch] * factor, 0.0
+    frozen = plan.recipe.model.trunk.freeze_backbone
+    pairs = (plan.n_train - plan.synthesize) / 2
+    # frames to encode into the cache: (part, frames), the synthesized episodes' own part
+    parts: list[tuple[str, float]] = []
+    cache_kind = "awda" if column.arch == "awda" else "tosvi"  # T-OSVI-style nets share one
+    if frozen and column.arch == "awda":  # cached features; the cache is encoded once
+        step_s = COSTS.frozen_step_s
+        # o_1 of every agent episode, the demo frames of every demonstrator and synthesized one
+        parts = [(cache_kind, pairs * 11), (f"{cache_kind}+synthesized", plan.synthesize * 10)]
+    elif frozen:  # T-OSVI over cached (pooled) maps: every agent frame is encoded once
+        from awda_bench.training.run import frame_stack_of
+
+        one_frame = frame_stack_of(plan.recipe, column) == 1
+        step_s = COSTS.frozen_tosvi_one_frame_step_s if one_frame else (
+            COSTS.frozen_tosvi_step_s[column.arch]
         )  # fmt: skip
-        evaluate = SweepConfig(
-            suite=config.suite, method=eval_method(column.arch, config.grasp_select), out=runs, checkpoints=ckpt,
-            snapshots=config.snapshots, episodes=config.episodes, workers=config.workers,
-            tasks=tuple(tasks), progress=config.progress, label=key,
-        )  # fmt: skip
-        n_eval = config.snapshots * episodes * units
-        trained = steps_done >= target
-        # until training is done the snapshots to evaluate are not all there: plan all of them
-        remaining = _eval_remaining(evaluate) if trained else None
-        stages.append(
-            _eval_stage(
-                key, evaluate, n_eval if remaining is None else remaining, column.arch,
-                f"{config.snapshots} snapshots x {episodes} episodes x {units} "
-                f"{'family' if suite.episode_unit == 'family' else 'tasks'}",
-            )
-        )  # fmt: skip
-        if key == FIT_CHECK_COLUMN and config.fit_check and config.hold_out is None:
-            train_tasks = fit_check_tasks(suite)
-            fit = replace(
-                evaluate, out=out / "runs-train-tasks", snapshots=FIT_CHECK_SNAPSHOTS,
-                tasks=train_tasks, label=FIT_CHECK_LABEL, split="train",
-            )  # fmt: skip
-            remaining = _eval_remaining(fit) if trained else None
-            n_fit = FIT_CHECK_SNAPSHOTS * episodes * len(train_tasks)
-            stages.append(
-                Stage(
-                    f"evaluate {key} on training tasks",
-                    _run_argv(fit),
-                    (n_fit if remaining is None else remaining)
-                    * COSTS.eval_episode_s[column.arch]
-                    / config.workers,
-                    remaining == 0,
-                    f"tasks {', '.join(map(str, train_tasks))}: did it fit?",
-                    fit,
-                )
-            )
-    for key in (k for k in config.columns if k in EVAL_VARIANTS):
-        variant = EVAL_VARIANTS[key]
-        ckpt = out / "checkpoints" / variant.trained
-        evaluate = SweepConfig(
-            suite=config.suite, method=variant.method, out=runs, checkpoints=ckpt,
-            snapshots=config.snapshots, episodes=config.episodes, workers=config.workers,
-            tasks=tuple(tasks), progress=config.progress, label=key,
-        )  # fmt: skip
-        trained = _steps_done(ckpt) >= target
-        remaining = _eval_remaining(evaluate) if trained else None
-        n_eval = config.snapshots * episodes * units
-        stages.append(
-            _eval_stage(
-                key, evaluate, n_eval if remaining is None else remaining,
-                COLUMN_KEYS[variant.trained].arch,
-                f"{variant.trained}'s snapshots with --method {variant.method}",
-            )
-        )  # fmt: skip
+        parts = [
+            (cache_kind, pairs * (COSTS.agent_episode_steps + 10)),
+            (f"{cache_kind}+synthesized", plan.synthesize * COSTS.synthesized_episode_frames),
+        ]
+    if not column.synthesized:
+        parts = parts[:1]
+    for part, frames in parts:
+        built = _cache_built(plan.data, plan.recipe, column.arch, synthesized=part != cache_kind)
+        if part not in planned_caches and not built:
+            encode_s += COSTS.encode_frame_s * frames
+        planned_caches.add(part)
+    return step_s, encode_s
+
+
+def _column_stages(plan: _Plan, key: str, planned_caches: set[str]) -> list[Stage]:
+    """A trained column's stages: train, evaluate, and for Full-1 the fit check on training
+    tasks."""
+    config, column = plan.config, COLUMN_KEYS[key]
+    ckpt = config.out / "checkpoints" / key
+    step_s, encode_s = _train_costs(plan, key, planned_caches)
+    _check_trained_recipe(ckpt, plan.recipe.for_suite(config.suite))
+    steps_done, target = _steps_done(ckpt), plan.target
+    stages = [
+        Stage(
+            f"train {key}",
+            _train_argv(plan, key, ckpt),
+            max(0, target - steps_done) * step_s + (encode_s if steps_done == 0 else 0.0),
+            steps_done >= target,
+            f"{column.name}: {target} steps"
+            + (f", resumes at {steps_done}" if 0 < steps_done < target else ""),
+        )
+    ]  # fmt: skip
+    evaluate = SweepConfig(
+        suite=config.suite, method=eval_method(column.arch, config.grasp_select), out=plan.runs,
+        checkpoints=ckpt, snapshots=config.snapshots, episodes=config.episodes,
+        workers=config.workers, tasks=tuple(plan.tasks), progress=config.progress, label=key,
+    )  # fmt: skip
+    n_eval = config.snapshots * plan.episodes * plan.units
+    trained = steps_done >= target
+    # until training is done the snapshots to evaluate are not all there: plan all of them
+    remaining = _eval_remaining(evaluate) if trained else None
     stages.append(
+        _eval_stage(
+            key, evaluate, n_eval if remaining is None else remaining, column.arch,
+            f"{config.snapshots} snapshots x {plan.episodes} episodes x {plan.units} "
+            f"{'family' if plan.suite.episode_unit == 'family' else 'tasks'}",
+        )
+    )  # fmt: skip
+    if key == FIT_CHECK_COLUMN and config.fit_check and config.hold_out is None:
+        stages.append(_fit_check_stage(plan, key, evaluate, trained))
+    return stages
+
+
+def _fit_check_stage(plan: _Plan, key: str, evaluate: SweepConfig, trained: bool) -> Stage:
+    """Column ``key``'s last snapshots on the held-out tasks' training siblings: did it fit?"""
+    train_tasks = fit_check_tasks(plan.suite)
+    fit = replace(
+        evaluate, out=plan.config.out / "runs-train-tasks", snapshots=FIT_CHECK_SNAPSHOTS,
+        tasks=train_tasks, label=FIT_CHECK_LABEL, split="train",
+    )  # fmt: skip
+    remaining = _eval_remaining(fit) if trained else None
+    n_fit = FIT_CHECK_SNAPSHOTS * plan.episodes * len(train_tasks)
+    return Stage(
+        f"evaluate {key} on training tasks",
+        _run_argv(fit),
+        (n_fit if remaining is None else remaining)
+        * COSTS.eval_episode_s[COLUMN_KEYS[key].arch]
+        / plan.config.workers,
+        remaining == 0,
+        f"tasks {', '.join(map(str, train_tasks))}: did it fit?",
+        fit,
+    )
+
+
+def _variant_stage(plan: _Plan, key: str) -> Stage:
+    """An evaluation-only column (another action rule over a trained column's snapshots)."""
+    config, variant = plan.config, EVAL_VARIANTS[key]
+    ckpt = config.out / "checkpoints" / variant.trained
+    evaluate = SweepConfig(
+        suite=config.suite, method=variant.method, out=plan.runs, checkpoints=ckpt,
+        snapshots=config.snapshots, episodes=config.episodes, workers=config.workers,
+        tasks=tuple(plan.tasks), progress=config.progress, label=key,
+    )  # fmt: skip
+    trained = _steps_done(ckpt) >= plan.target
+    remaining = _eval_remaining(evaluate) if trained else None
+    n_eval = config.snapshots * plan.episodes * plan.units
+    return _eval_stage(
+        key, evaluate, n_eval if remaining is None else remaining,
+        COLUMN_KEYS[variant.trained].arch,
+        f"{variant.trained}'s snapshots with --method {variant.method}",
+    )  # fmt: skip
+
+
+def _report_stages(out: Path, fit_checked: bool) -> list[Stage]:
+    """The report over the evaluations, and the fit check's where there is one."""
+    runs = out / "runs"
+    stages = [
         Stage(
             "report",
             ["report", "--runs", str(runs), "--out", str(out / "report")],
@@ -425,8 +483,8 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             False,
             "tables, figures, reproduce.md",
         )
-    )
-    if any(st.name.endswith("on training tasks") for st in stages):
+    ]
+    if fit_checked:
         stages.append(
             Stage(
                 "report training tasks",
@@ -440,6 +498,22 @@ def plan_stages(config: ReproduceConfig) -> list[Stage]:
             )
         )  # fmt: skip
     return stages
+
+
+def plan_stages(config: ReproduceConfig) -> list[Stage]:
+    """The pipeline for ``config``, each stage marked done or not (nothing runs here):
+    collections, then per trained column its training, evaluation (and fit check), then the
+    evaluation-only columns, then the reports."""
+    from awda_bench.suites import load_suite
+
+    _check_config(config)
+    stages, plan = _collect_stages(config, load_suite(config.suite))
+    planned_caches: set[str] = set()  # feature caches an earlier column of this plan encodes
+    for key in (k for k in config.columns if k not in EVAL_VARIANTS):
+        stages += _column_stages(plan, key, planned_caches)
+    stages += [_variant_stage(plan, k) for k in config.columns if k in EVAL_VARIANTS]
+    fit_checked = any(st.name.endswith("on training tasks") for st in stages)
+    return stages + _report_stages(config.out, fit_checked)
 
 
 def format_plan(config: ReproduceConfig, stages: list[Stage]) -> str:
