@@ -240,11 +240,7 @@ class BasketballEnv(AWDATaskEnv):
 
     def is_grasping_target(self) -> torch.Tensor:
         """(n,) simulator truth: both fingers press on the target ball."""
-        idx = self.target_ball_index
-        out = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
-        for j in torch.unique(idx).tolist():
-            out = torch.where(idx == j, self.agent.is_grasping(self.balls[j]), out)
-        return out
+        return self._is_grasping_per_env(self.balls, self.target_ball_index)
 
     def _evaluate_task(self) -> dict[str, torch.Tensor]:
         dist = torch.linalg.norm(self.target_position() - self.goal_position(), dim=1)

@@ -219,10 +219,7 @@ class DoorEnv(AWDATaskEnv):
     def is_grasping_target(self) -> torch.Tensor:
         """(n,) the hand holds the target door's handle (:func:`~.articulated.hand_holds`: both
         fingers on it, or the closed hand dragging it along the arc)."""
-        door = self.target_door
-        both = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
-        for j, link in enumerate(self.door_links):
-            both = torch.where(door == j, self.agent.is_grasping(link), both)
+        both = self._is_grasping_per_env(self.door_links, self.target_door)
         f1, f2 = self._target_contacts()
         opening = self.agent.gripper_opening_m.reshape(-1)
         closed = gripper_commanded_closed(self.agent)

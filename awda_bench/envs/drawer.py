@@ -213,11 +213,7 @@ class DrawerEnv(AWDATaskEnv):
     def is_grasping_target(self) -> torch.Tensor:
         """(n,) the hand holds the target drawer's handle (:func:`~.articulated.hand_holds`: both
         fingers on it, or the closed hand dragging it out)."""
-        drawer = self.target_drawer
-        both = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
-        for j, link in enumerate(self.drawer_links):
-            if bool((drawer == j).any()):
-                both = torch.where(drawer == j, self.agent.is_grasping(link), both)
+        both = self._is_grasping_per_env(self.drawer_links, self.target_drawer)
         opening = self.agent.gripper_opening_m.reshape(-1)
         closed = gripper_commanded_closed(self.agent)
         return hand_holds(both, self._target_contacts(), opening, closed)

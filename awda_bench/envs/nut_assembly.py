@@ -317,11 +317,7 @@ class NutAssemblyEnv(AWDATaskEnv):
 
     def is_grasping_target(self) -> torch.Tensor:
         """(n,) simulator truth: both fingers press on the target nut."""
-        idx = self.target_nut_index
-        out = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
-        for j in torch.unique(idx).tolist():
-            out = torch.where(idx == j, self.agent.is_grasping(self.nuts[j]), out)
-        return out
+        return self._is_grasping_per_env(self.nuts, self.target_nut_index)
 
     def _evaluate_task(self) -> dict[str, torch.Tensor]:
         lay = self.layout

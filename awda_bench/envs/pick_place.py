@@ -165,11 +165,7 @@ class PickPlaceEnv(AWDATaskEnv):
 
     def is_grasping_target(self) -> torch.Tensor:
         """(n,) simulator truth: both fingers press on the target (Panda's contact-force test)."""
-        idx = self.target_object_index
-        out = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
-        for j in torch.unique(idx).tolist():
-            out = torch.where(idx == j, self.agent.is_grasping(self.objects[j]), out)
-        return out
+        return self._is_grasping_per_env(self.objects, self.target_object_index)
 
     def target_position(self) -> torch.Tensor:
         return self.target_pose()[0]

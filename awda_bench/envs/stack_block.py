@@ -194,10 +194,7 @@ class StackBlockEnv(AWDATaskEnv):
 
     def is_grasping_target(self) -> torch.Tensor:
         """(n,) simulator truth: the fingers hold cube A (the agent's contact-force test)."""
-        out = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
-        for j in torch.unique(self.cube_a).tolist():
-            out = torch.where(self.cube_a == j, self.agent.is_grasping(self.cubes[j]), out)
-        return out
+        return self._is_grasping_per_env(self.cubes, self.cube_a)
 
     def _evaluate_task(self) -> dict[str, torch.Tensor]:
         lay = self.layout

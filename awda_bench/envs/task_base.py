@@ -19,6 +19,7 @@ places them in ``_initialize_task(env_idx, variation)``, and judges them in
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, ClassVar
 
 import numpy as np
@@ -27,6 +28,8 @@ import torch
 from mani_skill.sensors.camera import CameraConfig
 from mani_skill.utils import sapien_utils
 from mani_skill.utils.scene_builder.table import TableSceneBuilder
+from mani_skill.utils.structs.actor import Actor
+from mani_skill.utils.structs.link import Link
 from mani_skill.utils.structs.types import SimConfig
 
 from awda_bench.envs.embodiments import AGENT_UID, EMBODIMENTS, embodiment
@@ -107,6 +110,16 @@ class AWDATaskEnv(ExactStateEnv):
     def is_grasping_target(self) -> torch.Tensor:
         """(n,) simulator truth: the fingers hold the target (contact forces)."""
         return torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+
+    def _is_grasping_per_env(
+        self, bodies: Sequence[Actor | Link], index: torch.Tensor
+    ) -> torch.Tensor:
+        """(n,) simulator truth: the fingers hold ``bodies[index[i]]`` in env ``i`` (the agent's
+        contact-force test, asked only of the bodies some env's ``index`` names)."""
+        out = torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
+        for j in torch.unique(index).tolist():
+            out = torch.where(index == j, self.agent.is_grasping(bodies[j]), out)
+        return out
 
     def truth_signals(self) -> dict[str, torch.Tensor]:
         """(n,) bool simulator truths logged per step by the demo recorder (attribute mining)."""
