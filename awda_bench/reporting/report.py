@@ -21,6 +21,7 @@ import json
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -133,15 +134,21 @@ def _header(
     return "\n".join(lines)
 
 
-def write_report(
-    run_dir: Path, out_dir: Path, metric: str = aggregate.DEFAULT_METRIC
-) -> ReportResult:
-    """Read ``run_dir``'s store and write every table and figure into ``out_dir``."""
-    if metric not in aggregate.METRICS:
-        raise UsageError(
-            f"unknown metric {metric!r}; choose one of: {', '.join(aggregate.METRICS)}"
-        )
-    result = ReportResult(out_dir=out_dir)
+@dataclass(frozen=True)
+class _StoreTables:
+    """What a report reads from one results store (:func:`_read_store`)."""
+
+    episodes: pd.DataFrame
+    snapshots: pd.DataFrame
+    protocols: pd.DataFrame
+    per_snap: pd.DataFrame
+    cells: list[aggregate.Cell]
+    counts: pd.DataFrame
+    header: str
+
+
+def _read_store(run_dir: Path, metric: str, warnings: list[str]) -> _StoreTables:
+    """``run_dir``'s episodes, aggregated; the counts' warnings appended to ``warnings``."""
     with ResultsStore(run_dir, create=False) as store:
         episodes, snapshots, protocols = store.episodes(), store.snapshots(), store.protocols()
         if episodes.empty:
@@ -153,22 +160,29 @@ def write_report(
         counts = count_table(per_snap, protocols)
         for suite, row in counts.iterrows():
             if row["missing"]:
-                result.warnings.append(
+                warnings.append(
                     f"{suite}/{row['method']}: expected {row['expected']} episodes, "
                     f"recorded {row['ok'] + row['errors']} "
                     f"({row['missing']} missing) — re-run the same command to finish"
                 )
             if row["errors"]:
-                result.warnings.append(
+                warnings.append(
                     f"{suite}/{row['method']}: {row['errors']} episodes ended in errors "
                     "(see errors.md)"
                 )
-        header = _header(store, protocols, counts, metric, result.warnings)
+        header = _header(store, protocols, counts, metric, warnings)
+    return _StoreTables(episodes, snapshots, protocols, per_snap, cells, counts, header)
 
+
+def _sections(read: _StoreTables, metric: str) -> list[tuple[str, str, pd.DataFrame]]:
+    """The report's tables in order: ``(file stem, title, table)``."""
+    episodes, snapshots, protocols, per_snap = (
+        read.episodes, read.snapshots, read.protocols, read.per_snap
+    )  # fmt: skip
     suite_of = protocols.set_index("fingerprint")["suite"]
     display = dict(zip(protocols["suite"], protocols["display_name"], strict=True))
     privileged = set(snapshots.loc[snapshots["privileged"].fillna(0).astype(int) == 1, "method"])
-    marked = tables.mark_privileged(cells, privileged)
+    marked = tables.mark_privileged(read.cells, privileged)
     sections: list[tuple[str, str, pd.DataFrame]] = [
         ("s3", "Table S3: success per suite (held-out tasks)", tables.table_s3(marked, display)),
     ]
@@ -209,7 +223,7 @@ def write_report(
             aggregate.per_task(episodes, metric).set_index("suite"),
         )
     )
-    sections.append(("counts", "Episode counts", counts))
+    sections.append(("counts", "Episode counts", read.counts))
     errors = episodes[episodes["status"] == "error"]
     if len(errors):
         err_table = errors.assign(
@@ -220,33 +234,57 @@ def write_report(
             ["suite", "method", "snapshot", "task", "episode", "seed", "attempts", "last_line"]
         ].set_index("suite")
         sections.append(("errors", "Errors (full tracebacks in the store)", err_table))
+    return sections
 
-    body = [header]
-    for stem, title, df in sections:
-        result.files += tables.write_table(df, out_dir, stem)
-        if stem != "counts":  # already in the header
-            body += [f"## {title}", "", tables.to_markdown(df)]
 
-    for (proto, method), g in per_snap.groupby(["protocol", "method"]):
+def _snapshot_figures(read: _StoreTables, metric: str, out_dir: Path) -> list[Path]:
+    """Success against snapshot, one figure per learned (suite, method)."""
+    suite_of = read.protocols.set_index("fingerprint")["suite"]
+    files = []
+    for (proto, method), g in read.per_snap.groupby(["protocol", "method"]):
         if bool(g["learned"].any()):
             path = out_dir / "figures" / f"success_vs_snapshot_{suite_of[proto]}_{method}.png"
-            result.files.append(
+            files.append(
                 plot_success_vs_snapshot(
                     g.sort_values("ord"), f"{suite_of[proto]} / {method} ({metric})", path
                 )
             )
+    return files
 
-    summary = {
+
+def _summary(read: _StoreTables, metric: str, warnings: list[str]) -> dict[str, Any]:
+    """``summary.json``: the protocols, counts, cells and warnings."""
+    return {
         "metric": metric,
         "protocols": {
             r["suite"]: {"fingerprint": r["fingerprint"], **json.loads(r["definition"])}
-            for _, r in protocols.iterrows()
+            for _, r in read.protocols.iterrows()
         },
-        "counts": counts.reset_index().to_dict(orient="records"),
-        "cells": [c.to_dict() for c in cells],
-        "warnings": result.warnings,
+        "counts": read.counts.reset_index().to_dict(orient="records"),
+        "cells": [c.to_dict() for c in read.cells],
+        "warnings": warnings,
     }
+
+
+def write_report(
+    run_dir: Path, out_dir: Path, metric: str = aggregate.DEFAULT_METRIC
+) -> ReportResult:
+    """Read ``run_dir``'s store and write every table and figure into ``out_dir``: the store
+    aggregated, its tables (csv and markdown), the figures, ``summary.json`` and ``report.md``."""
+    if metric not in aggregate.METRICS:
+        raise UsageError(
+            f"unknown metric {metric!r}; choose one of: {', '.join(aggregate.METRICS)}"
+        )
+    result = ReportResult(out_dir=out_dir)
+    read = _read_store(run_dir, metric, result.warnings)
+    body = [read.header]
+    for stem, title, df in _sections(read, metric):
+        result.files += tables.write_table(df, out_dir, stem)
+        if stem != "counts":  # already in the header
+            body += [f"## {title}", "", tables.to_markdown(df)]
+    result.files += _snapshot_figures(read, metric, out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
+    summary = _summary(read, metric, result.warnings)
     (out_dir / "summary.json").write_text(json.dumps(summary, indent=2, default=int) + "\n")
     (out_dir / "report.md").write_text("\n".join(body))
     result.files += [out_dir / "summary.json", out_dir / "report.md"]
