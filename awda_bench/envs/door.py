@@ -7,19 +7,19 @@ from typing import Any, ClassVar
 
 import torch
 from mani_skill.utils.registration import register_env
+from mani_skill.utils.structs.link import Link
 from mani_skill.utils.structs.pose import Pose
 
 from awda_bench.envs.articulated import (
     DoorCabinetSpec,
     PlacementNoise,
     build_door_cabinet,
-    hand_holds,
     rotate_z,
     sample_placements,
     yaw_quat,
 )
+from awda_bench.envs.cabinet_task import CabinetTaskEnv
 from awda_bench.envs.task_base import AWDATaskEnv
-from awda_bench.robot.controller import gripper_commanded_closed
 
 NUM_DOOR_VARIATIONS = 4
 """``variation = 2 * door + action``; action 0 = open, 1 = close."""
@@ -74,7 +74,7 @@ class DoorLayout:
 
 
 @register_env("AWDA-Door-v1", max_episode_steps=200)
-class DoorEnv(AWDATaskEnv):
+class DoorEnv(CabinetTaskEnv):
     """
     **Task Description:**
     Two cabinets stand side by side in front of the robot, each closed by one door on a vertical
@@ -100,12 +100,8 @@ class DoorEnv(AWDATaskEnv):
 
     family: ClassVar[str] = "door"
     num_variations: ClassVar[int] = NUM_DOOR_VARIATIONS
-    has_grasp_target: ClassVar[bool] = False
-    third_person_eye_m: ClassVar[tuple[float, float, float]] = (-0.46, 0.0, 0.44)
-    """In front of the cabinets, under the arm's upper links, looking at their fronts (they face
-    the robot, so the pick-place camera at +x would see their backs)."""
-    third_person_target_m: ClassVar[tuple[float, float, float]] = (0.10, 0.0, 0.12)
-    third_person_fov_rad: ClassVar[float] = 1.25
+    openings_key: ClassVar[str] = "door_angles"
+    opening_key: ClassVar[str] = "door_angle_rad"
 
     _TASK_STATE: ClassVar[tuple[str, ...]] = (*AWDATaskEnv._TASK_STATE,)
 
@@ -138,24 +134,12 @@ class DoorEnv(AWDATaskEnv):
             cabinet.set_qvel(torch.zeros((b, 1), device=self.device))
 
     # ------------------------------------------------------------------ task geometry
-    @property
-    def target_door(self) -> torch.Tensor:
-        """(n,) index of each env's target door."""
-        return self.task // 2
-
-    @property
-    def wants_open(self) -> torch.Tensor:
-        """(n,) True where the variation asks to open the door (False: close it)."""
-        return (self.task % 2) == 0
-
-    def door_angles(self) -> torch.Tensor:
-        """(n, 2) hinge angles of both doors [rad] (0 = shut, positive = open)."""
-        return torch.cat([c.get_qpos() for c in self.cabinets], dim=1)
-
-    def target_angle(self) -> torch.Tensor:
-        """(n,) hinge angle of each env's target door [rad]."""
-        rows = torch.arange(self.num_envs, device=self.device)
-        return self.door_angles()[rows, self.target_door]
+    target_door = CabinetTaskEnv.target_part
+    """(n,) index of each env's target door."""
+    door_angles = CabinetTaskEnv.part_openings
+    """(n, 2) hinge angles of both doors [rad] (0 = shut, positive = open)."""
+    target_angle = CabinetTaskEnv.target_opening
+    """(n,) hinge angle of each env's target door [rad]."""
 
     def _gather(self, per_door: torch.Tensor) -> torch.Tensor:
         """Pick each env's target door from a (n, 2, ...) tensor."""
@@ -201,8 +185,11 @@ class DoorEnv(AWDATaskEnv):
         return self.layout.doors[int(self.target_door[i])]
 
     # ------------------------------------------------------------------ truths
-    def _target_contacts(self) -> tuple[torch.Tensor, torch.Tensor]:
-        """(n,) contact force magnitudes [N] of the two fingers on each env's target door."""
+    def _part_links(self) -> list[Link]:
+        return self.door_links
+
+    def _target_contacts(self) -> torch.Tensor:
+        """(n, 2) contact force magnitudes [N] of the two fingers on each env's target door."""
         door = self.target_door
         forces = []
         for finger in (self.agent.finger1_link, self.agent.finger2_link):
@@ -214,44 +201,8 @@ class DoorEnv(AWDATaskEnv):
                 dim=1,
             )
             forces.append(per_door[torch.arange(self.num_envs, device=self.device), door])
-        return forces[0], forces[1]
-
-    def is_grasping_target(self) -> torch.Tensor:
-        """(n,) the hand holds the target door's handle (:func:`~.articulated.hand_holds`: both
-        fingers on it, or the closed hand dragging it along the arc)."""
-        both = self._is_grasping_per_env(self.door_links, self.target_door)
-        f1, f2 = self._target_contacts()
-        opening = self.agent.gripper_opening_m.reshape(-1)
-        closed = gripper_commanded_closed(self.agent)
-        return hand_holds(both, torch.stack([f1, f2], dim=1), opening, closed)
-
-    def is_pushing_target(
-        self, min_force_n: float = 0.05, grasping: torch.Tensor | None = None
-    ) -> torch.Tensor:
-        """(n,) a finger presses on the target door with >= ``min_force_n`` [N], no grasp (the
-        passive, damped joint resists a steady push with only a few tenths of a newton).
-        ``grasping``: :meth:`is_grasping_target` if the caller has it already."""
-        f1, f2 = self._target_contacts()
-        return (torch.maximum(f1, f2) >= min_force_n) & ~(
-            self.is_grasping_target() if grasping is None else grasping
-        )
-
-    def truth_signals(self) -> dict[str, torch.Tensor]:
-        """``grasp`` (scored against the mined grasp attribute) and ``push`` (a finger on the
-        door without a grasp: the swing being pushed shut, which moves -- not the pressing
-        attribute, commanded motion that does not move, so it is not scored as "press")."""
-        grasp = self.is_grasping_target()  # contact queries once per step, not twice
-        return {"grasp": grasp, "push": self.is_pushing_target(grasping=grasp)}
+        return torch.stack(forces, dim=1)
 
     # ------------------------------------------------------------------ evaluation
-    def _evaluate_task(self) -> dict[str, torch.Tensor]:
-        angle = self.target_angle()
-        opened = angle >= self.layout.open_success_rad
-        closed = angle <= self.layout.close_success_rad
-        return {"success": torch.where(self.wants_open, opened, closed), "door_angle_rad": angle}
-
-    def _get_obs_extra(self, info: dict) -> dict:
-        obs = super()._get_obs_extra(info)
-        if "state" in self.obs_mode:
-            obs.update(door_angles=self.door_angles(), handle_pos=self.handle_position())
-        return obs
+    def _success_thresholds(self) -> tuple[float, float]:
+        return self.layout.open_success_rad, self.layout.close_success_rad

@@ -7,19 +7,18 @@ from typing import Any, ClassVar
 
 import torch
 from mani_skill.utils.registration import register_env
+from mani_skill.utils.structs.link import Link
 from mani_skill.utils.structs.pose import Pose
 
 from awda_bench.envs.articulated import (
     DrawerCabinetSpec,
     PlacementNoise,
     build_drawer_cabinet,
-    hand_holds,
     rotate_z,
     sample_placements,
     yaw_quat,
 )
-from awda_bench.envs.task_base import AWDATaskEnv
-from awda_bench.robot.controller import gripper_commanded_closed
+from awda_bench.envs.cabinet_task import CabinetTaskEnv
 
 NUM_DRAWER_VARIATIONS = 8
 """``variation = 2 * drawer + action`` with ``drawer = 2 * cabinet + level`` (level 0 = lower,
@@ -78,7 +77,7 @@ class DrawerLayout:
 
 
 @register_env("AWDA-Drawer-v1", max_episode_steps=200)
-class DrawerEnv(AWDATaskEnv):
+class DrawerEnv(CabinetTaskEnv):
     """
     **Task Description:**
     Two cabinets stand left and right in front of the robot, each with two stacked drawers
@@ -106,12 +105,8 @@ class DrawerEnv(AWDATaskEnv):
 
     family: ClassVar[str] = "drawer"
     num_variations: ClassVar[int] = NUM_DRAWER_VARIATIONS
-    has_grasp_target: ClassVar[bool] = False
-    third_person_eye_m: ClassVar[tuple[float, float, float]] = (-0.46, 0.0, 0.44)
-    """In front of the cabinets, under the arm's upper links, looking at their fronts (they face
-    the robot, so the pick-place camera at +x would see their backs)."""
-    third_person_target_m: ClassVar[tuple[float, float, float]] = (0.10, 0.0, 0.12)
-    third_person_fov_rad: ClassVar[float] = 1.25
+    openings_key: ClassVar[str] = "drawer_slides"
+    opening_key: ClassVar[str] = "drawer_slide_m"
 
     def __init__(self, *args: Any, layout: DrawerLayout | None = None, **kwargs: Any) -> None:
         self.layout = layout or DrawerLayout()
@@ -151,24 +146,12 @@ class DrawerEnv(AWDATaskEnv):
             art.set_qvel(torch.zeros((b, 2), device=dev))
 
     # ------------------------------------------------------------------ task geometry
-    @property
-    def target_drawer(self) -> torch.Tensor:
-        """(n,) index 0..3 of each env's target drawer (``2 * cabinet + level``)."""
-        return self.task // 2
-
-    @property
-    def wants_open(self) -> torch.Tensor:
-        """(n,) True where the variation asks to open the drawer (False: close it)."""
-        return (self.task % 2) == 0
-
-    def drawer_slides(self) -> torch.Tensor:
-        """(n, 4) slide-out distance of every drawer [m] (0 = shut), drawer-index order."""
-        return torch.cat([c.get_qpos() for c in self.cabinets], dim=1)
-
-    def target_slide(self) -> torch.Tensor:
-        """(n,) slide-out distance of each env's target drawer [m]."""
-        rows = torch.arange(self.num_envs, device=self.device)
-        return self.drawer_slides()[rows, self.target_drawer]
+    target_drawer = CabinetTaskEnv.target_part
+    """(n,) index 0..3 of each env's target drawer (``2 * cabinet + level``)."""
+    drawer_slides = CabinetTaskEnv.part_openings
+    """(n, 4) slide-out distance of every drawer [m] (0 = shut), drawer-index order."""
+    target_slide = CabinetTaskEnv.target_opening
+    """(n,) slide-out distance of each env's target drawer [m]."""
 
     def slide_axis(self) -> torch.Tensor:
         """(n, 3) world unit vector along which each env's target drawer opens (to the robot)."""
@@ -198,6 +181,9 @@ class DrawerEnv(AWDATaskEnv):
         return self.layout.cabinets[int(self.target_drawer[i]) // 2]
 
     # ------------------------------------------------------------------ truths
+    def _part_links(self) -> list[Link]:
+        return self.drawer_links
+
     def _target_contacts(self) -> torch.Tensor:
         """(n, 2) contact force magnitudes [N] of the two fingers on each env's target drawer."""
         drawer = self.target_drawer
@@ -210,41 +196,6 @@ class DrawerEnv(AWDATaskEnv):
                 forces[:, k] = torch.where(drawer == j, f, forces[:, k])
         return forces
 
-    def is_grasping_target(self) -> torch.Tensor:
-        """(n,) the hand holds the target drawer's handle (:func:`~.articulated.hand_holds`: both
-        fingers on it, or the closed hand dragging it out)."""
-        both = self._is_grasping_per_env(self.drawer_links, self.target_drawer)
-        opening = self.agent.gripper_opening_m.reshape(-1)
-        closed = gripper_commanded_closed(self.agent)
-        return hand_holds(both, self._target_contacts(), opening, closed)
-
-    def is_pushing_target(
-        self, min_force_n: float = 0.05, grasping: torch.Tensor | None = None
-    ) -> torch.Tensor:
-        """(n,) a finger presses on the target drawer with >= ``min_force_n`` [N], no grasp (the
-        passive, damped joint resists a steady push with only a few tenths of a newton).
-        ``grasping``: :meth:`is_grasping_target` if the caller has it already."""
-        force = self._target_contacts().max(dim=1).values
-        return (force >= min_force_n) & ~(
-            self.is_grasping_target() if grasping is None else grasping
-        )
-
-    def truth_signals(self) -> dict[str, torch.Tensor]:
-        """``grasp`` (scored against the mined grasp attribute) and ``push`` (a finger on the
-        drawer without a grasp: the drawer being pushed shut, which moves -- not the pressing
-        attribute, commanded motion that does not move, so it is not scored as "press")."""
-        grasp = self.is_grasping_target()  # contact queries once per step, not twice
-        return {"grasp": grasp, "push": self.is_pushing_target(grasping=grasp)}
-
     # ------------------------------------------------------------------ evaluation
-    def _evaluate_task(self) -> dict[str, torch.Tensor]:
-        slide = self.target_slide()
-        opened = slide >= self.layout.open_success_m
-        closed = slide <= self.layout.close_success_m
-        return {"success": torch.where(self.wants_open, opened, closed), "drawer_slide_m": slide}
-
-    def _get_obs_extra(self, info: dict) -> dict:
-        obs = super()._get_obs_extra(info)
-        if "state" in self.obs_mode:
-            obs.update(drawer_slides=self.drawer_slides(), handle_pos=self.handle_position())
-        return obs
+    def _success_thresholds(self) -> tuple[float, float]:
+        return self.layout.open_success_m, self.layout.close_success_m
