@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import sapien
 import torch
 from mani_skill.envs.scene import ManiSkillScene
+from mani_skill.utils.building.articulation_builder import ArticulationBuilder
 from mani_skill.utils.structs.articulation import Articulation
 from sapien.wrapper.articulation_builder import LinkBuilder
 
@@ -149,6 +150,46 @@ def add_vertical_cylinder(
     )
 
 
+def _new_cabinet(
+    scene: ManiSkillScene, center_xy_m: tuple[float, float]
+) -> tuple[ArticulationBuilder, LinkBuilder]:
+    """An articulation builder rooted at ``center_xy_m`` on the table, and its root link
+    ``carcass``."""
+    builder = scene.create_articulation_builder()
+    builder.initial_pose = sapien.Pose(p=[*center_xy_m, 0.0])
+    return builder, _prop_link(builder, "carcass")
+
+
+def _prop_link(
+    builder: ArticulationBuilder, name: str, parent: LinkBuilder | None = None
+) -> LinkBuilder:
+    """A new link ``name`` of ``builder`` (a child of ``parent``) that never collides with the
+    prop's other links."""
+    link = builder.create_link_builder(parent)
+    link.set_name(name)
+    link.collision_groups[2] |= _NO_SELF_COLLISION_BIT
+    return link
+
+
+def _add_carcass_shell(
+    carcass: LinkBuilder,
+    *,
+    front_x_m: float,
+    half_width_m: float,
+    depth_m: float,
+    height_m: float,
+    wall_m: float,
+    color: RGBA,
+) -> None:
+    """The carcass's two sides, top and bottom, from ``front_x_m`` back to ``depth_m`` (root
+    frame) [m]; the caller adds the back and any divider."""
+    w, d, h, t, x = half_width_m, depth_m, height_m, wall_m, front_x_m
+    add_box(carcass, lo_m=(x, -w, 0.001), hi_m=(d, -w + t, h), color=color)  # side -y
+    add_box(carcass, lo_m=(x, w - t, 0.001), hi_m=(d, w, h), color=color)  # side +y
+    add_box(carcass, lo_m=(x, -w, h - t), hi_m=(d, w, h), color=color)  # top
+    add_box(carcass, lo_m=(x, -w, 0.001), hi_m=(d, w, t), color=color)  # bottom
+
+
 def _set_joint_dynamics(art: Articulation, *, damping: float, friction: float) -> None:
     """Passive joints: no drive stiffness, velocity damping and Coulomb-like joint friction."""
     for joint in art.active_joints:
@@ -256,23 +297,16 @@ class DoorCabinetSpec:
 
 def build_door_cabinet(scene: ManiSkillScene, spec: DoorCabinetSpec) -> Articulation:
     """Build ``spec`` (one articulation per parallel scene): links ``carcass`` and ``door``."""
-    builder = scene.create_articulation_builder()
-    builder.initial_pose = sapien.Pose(p=[*spec.center_xy_m, 0.0])
+    builder, carcass = _new_cabinet(scene, spec.center_xy_m)
     w, d, h, t = spec.width_m / 2, spec.depth_m, spec.height_m, spec.wall_m
-    carcass = builder.create_link_builder()
-    carcass.set_name("carcass")
-    carcass.collision_groups[2] |= _NO_SELF_COLLISION_BIT
     inset = spec.panel_thickness_m + spec.panel_gap_m  # carcass walls start behind the panel
     color = spec.carcass_color
-    add_box(carcass, lo_m=(inset, -w, 0.001), hi_m=(d, -w + t, h), color=color)  # side -y
-    add_box(carcass, lo_m=(inset, w - t, 0.001), hi_m=(d, w, h), color=color)  # side +y
-    add_box(carcass, lo_m=(inset, -w, h - t), hi_m=(d, w, h), color=color)  # top
-    add_box(carcass, lo_m=(inset, -w, 0.001), hi_m=(d, w, t), color=color)  # bottom
+    _add_carcass_shell(
+        carcass, front_x_m=inset, half_width_m=w, depth_m=d, height_m=h, wall_m=t, color=color
+    )
     add_box(carcass, lo_m=(d - t, -w, 0.001), hi_m=(d, w, h), color=color)  # back
 
-    door = builder.create_link_builder(carcass)
-    door.set_name("door")
-    door.collision_groups[2] |= _NO_SELF_COLLISION_BIT
+    door = _prop_link(builder, "door", carcass)
     joint_q = hinge_joint_quat(spec.opening_sign)
     door.set_joint_name("hinge")
     door.set_joint_properties(
@@ -406,17 +440,12 @@ class DrawerCabinetSpec:
 
 def build_drawer_cabinet(scene: ManiSkillScene, spec: DrawerCabinetSpec) -> Articulation:
     """Build ``spec``: links ``carcass``, ``drawer_0`` (lower), ``drawer_1`` (upper)."""
-    builder = scene.create_articulation_builder()
-    builder.initial_pose = sapien.Pose(p=[*spec.center_xy_m, 0.0])
+    builder, carcass = _new_cabinet(scene, spec.center_xy_m)
     w, d, h, t = spec.width_m / 2, spec.depth_m, spec.height_m, spec.wall_m
-    carcass = builder.create_link_builder()
-    carcass.set_name("carcass")
-    carcass.collision_groups[2] |= _NO_SELF_COLLISION_BIT
     color = spec.carcass_color
-    add_box(carcass, lo_m=(0.0, -w, 0.001), hi_m=(d, -w + t, h), color=color)  # side -y
-    add_box(carcass, lo_m=(0.0, w - t, 0.001), hi_m=(d, w, h), color=color)  # side +y
-    add_box(carcass, lo_m=(0.0, -w, h - t), hi_m=(d, w, h), color=color)  # top
-    add_box(carcass, lo_m=(0.0, -w, 0.001), hi_m=(d, w, t), color=color)  # bottom
+    _add_carcass_shell(
+        carcass, front_x_m=0.0, half_width_m=w, depth_m=d, height_m=h, wall_m=t, color=color
+    )
     mid = t + spec.opening_height_m
     add_box(carcass, lo_m=(0.0, -w, mid), hi_m=(d, w, mid + t), color=color)  # divider
     add_box(carcass, lo_m=(d - t, -w, 0.001), hi_m=(d, w, h), color=color)  # back
@@ -428,9 +457,7 @@ def build_drawer_cabinet(scene: ManiSkillScene, spec: DrawerCabinetSpec) -> Arti
     hd, hw, hh = spec.handle_head_size_m
     stem = spec.handle_stem_m
     for k, (z, hy) in enumerate(zip(spec.drawer_center_z_m, spec.handle_y_m, strict=True)):
-        drawer = builder.create_link_builder(carcass)
-        drawer.set_name(f"drawer_{k}")
-        drawer.collision_groups[2] |= _NO_SELF_COLLISION_BIT
+        drawer = _prop_link(builder, f"drawer_{k}", carcass)
         drawer.set_joint_name(f"slide_{k}")
         drawer.set_joint_properties(
             "prismatic",
