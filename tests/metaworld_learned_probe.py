@@ -31,10 +31,12 @@ class LearnedProbe:
 
     def __init__(self, snapshot: str | Path) -> None:
         from awda_bench.policies.awda_policy import AWDAPolicy
-        from awda_bench.policies.tosvi_policy import tosvi
+        from awda_bench.policies.tosvi_policy import TosviPolicy
 
         arch = snapshots.load_snapshot(Path(snapshot)).arch
-        self.inner: Any = AWDAPolicy(snapshot) if arch == "awda" else tosvi(snapshot)
+        self.inner: Any = (
+            AWDAPolicy(snapshot) if arch == "awda" else TosviPolicy(snapshot, arch="tosvi")
+        )
         self.actions: list[np.ndarray] = []
 
     def reset(self, ctx: EpisodeContext) -> None:

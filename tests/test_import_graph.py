@@ -5,13 +5,16 @@ module (``episode``, ``runtimes``, ...); rooms import only downward (docs/design
 is read from the source with :mod:`ast`: every ``import`` and ``from ... import``, relative ones
 and those inside functions or under ``TYPE_CHECKING`` included. ``from package import name``
 counts as importing the submodule ``package.name`` when there is one, else the package itself.
-Modules loaded by name at run time (``importlib.import_module`` in ``cli`` and ``commands.bench``)
-are not imports here.
+A ``"awda_bench.module:attribute"`` string (what the method registry, ``evaluation.methods``,
+loads a method's policy from at run time) counts as importing that module; other modules loaded by
+name at run time (``importlib.import_module`` in ``cli`` and ``commands.bench``) are not imports
+here.
 """
 
 from __future__ import annotations
 
 import ast
+import re
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -52,6 +55,14 @@ def _imported_names(tree: ast.AST, package: str) -> Iterator[tuple[str, list[str
             else:
                 base = node.module or ""
             yield base, [alias.name for alias in node.names], node.lineno
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+            named = LOADED_BY_NAME.fullmatch(node.value)
+            if named is not None:
+                yield named.group(1), [], node.lineno
+
+
+LOADED_BY_NAME = re.compile(rf"({PACKAGE}(?:\.\w+)+):[\w.]+")
+"""A ``"module:attribute"`` target inside the package (a registered method's policy)."""
 
 
 def import_graph() -> dict[str, dict[str, int]]:
@@ -125,6 +136,10 @@ def test_the_graph_sees_imports_at_every_depth() -> None:
     assert f"{PACKAGE}.reporting.videos" in graph[f"{PACKAGE}.commands.run"]  # inside run()
     assert f"{PACKAGE}.robot.demonstrator" in graph[f"{PACKAGE}.envs"]  # from robot import module
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    # what a method name loads: the registry's "module:attribute" targets
+    methods = graph[f"{PACKAGE}.evaluation.methods"]
+    for policy in ("tosvi_policy", "awda_policy", "gt_waypoints", "random_policy"):
+        assert f"{PACKAGE}.policies.{policy}" in methods
 
 
 def test_no_module_imports_itself_through_others() -> None:

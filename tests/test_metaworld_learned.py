@@ -36,7 +36,7 @@ from awda_bench.metaworld.sawyer_interface import SawyerInterface
 from awda_bench.models.architectures import build_model
 from awda_bench.models.config import AwdaConfig, TosviConfig, TrunkConfig
 from awda_bench.models.snapshot import save_snapshot
-from awda_bench.policies.awda_policy import AWDAPolicy, awda_centre
+from awda_bench.policies.awda_policy import AWDAPolicy, awda
 from awda_bench.primitives.config import ExecutorConfig
 from awda_bench.primitives.executor import WaypointExecutor
 from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION
@@ -156,7 +156,7 @@ def test_awda_drives_the_sawyer_on_meta_world_and_the_panda_elsewhere(
 ) -> None:
     snapshot = _awda(tmp_path / "snapshot-000000001.pt", trunk=_trunk())
     for view in (_SawyerView(), _PandaView()):
-        policy = awda_centre(snapshot) if centre else AWDAPolicy(snapshot)
+        policy = awda(snapshot, "centre") if centre else AWDAPolicy(snapshot)
         policy.reset(_context(view))
         waypoints = policy.waypoints
         assert waypoints is not None and waypoints.shape == (5, 4)

@@ -213,8 +213,7 @@ def test_num_waypoints_selects_the_gt_waypoints_variant(tmp_path: Path, capsys) 
     import argparse
 
     from awda_bench.commands.run import add_parser, config_from_args
-    from awda_bench.evaluation.methods import get_method
-    from awda_bench.policies.gt_waypoints import gt_waypoints_k3, gt_waypoints_k8
+    from awda_bench.evaluation.methods import SnapshotRef, get_method, make_policy
 
     parser = argparse.ArgumentParser()
     sub = parser.add_subparsers()
@@ -228,9 +227,10 @@ def test_num_waypoints_selects_the_gt_waypoints_variant(tmp_path: Path, capsys) 
     assert method("--num-waypoints", "5") == "gt-waypoints"
     assert method("--num-waypoints", "3") == "gt-waypoints-k3"
     assert method("--num-waypoints", "8") == "gt-waypoints-k8"
-    assert get_method("gt-waypoints-k8").target.endswith(":gt_waypoints_k8")
-    assert gt_waypoints_k3().config.num_waypoints == 3
-    assert gt_waypoints_k8().config.num_waypoints == 8
+    builtin = SnapshotRef("builtin", "builtin", None, 0)
+    for k in (3, 8):  # one factory, the variant its parameter
+        policy = make_policy(get_method(f"gt-waypoints-k{k}"), builtin)
+        assert policy.config.num_waypoints == k and policy.name == f"gt-waypoints-k{k}"
     # only for gt-waypoints: one line, exit 2, nothing written
     code = main(
         [
@@ -316,8 +316,8 @@ def test_grasp_select_centre_folds_into_the_centre_methods(tmp_path: Path, capsy
     import argparse
 
     from awda_bench.commands.run import add_parser, config_from_args
-    from awda_bench.evaluation.methods import get_method
-    from awda_bench.policies.gt_waypoints import GTWaypointsPolicy, gt_waypoints_centre
+    from awda_bench.evaluation.methods import SnapshotRef, get_method, make_policy
+    from awda_bench.policies.gt_waypoints import GTWaypointsPolicy
 
     parser = argparse.ArgumentParser()
     add_parser(parser.add_subparsers())
@@ -334,7 +334,9 @@ def test_grasp_select_centre_folds_into_the_centre_methods(tmp_path: Path, capsy
     assert method("--grasp-select", "centre") == "gt-waypoints-centre"
     assert method("--method", "awda", "--grasp-select", "centre") == "awda-centre"
     assert get_method("awda-centre").learned and not get_method("gt-waypoints-centre").learned
-    policy = gt_waypoints_centre()
+    policy = make_policy(
+        get_method("gt-waypoints-centre"), SnapshotRef("builtin", "builtin", None, 0)
+    )
     assert policy.config.localization.select == "centre" and policy.name == "gt-waypoints-centre"
     for bad, select in (
         (["--method", "scripted"], "waypoint"),

@@ -148,7 +148,7 @@ def test_sampled_actions_are_valid_and_follow_torch_seed(
 
 def test_wrong_snapshots_and_selections_are_refused(tmp_path: Path, snapshot: Path) -> None:
     from awda_bench.errors import CorruptFileError, UnknownChoiceError
-    from awda_bench.policies.tosvi_policy import TosviPolicy, tosvi_depth, tosvi_method_name
+    from awda_bench.policies.tosvi_policy import TosviPolicy, tosvi_method_name
 
     awda = tmp_path / "awda" / "snapshot-000000001.pt"
     awda.parent.mkdir()
@@ -156,7 +156,7 @@ def test_wrong_snapshots_and_selections_are_refused(tmp_path: Path, snapshot: Pa
     with pytest.raises(CorruptFileError, match="holds a 'awda' model"):
         TosviPolicy(awda)
     with pytest.raises(CorruptFileError, match="not tosvi-depth"):
-        tosvi_depth(snapshot)
+        TosviPolicy(snapshot, arch="tosvi-depth")
     with pytest.raises(UnknownChoiceError):
         TosviPolicy(snapshot, "argmax")
     assert tosvi_method_name("tosvi", "sample") == "tosvi"

@@ -76,6 +76,9 @@ class MethodSpec:
     served: ServedMethod | None = None
     """Set for a served method: its policy is a :class:`RemotePolicy` talking to this server
     (``target`` is then unused)."""
+    options: tuple[tuple[str, Any], ...] = ()
+    """Keyword arguments of the target's call, ``(name, value)`` pairs: a family's variant (one
+    factory per family, e.g. ``tosvi-mean`` is ``TosviPolicy(path, action_select="mean")``)."""
 
 
 @dataclass(frozen=True)
@@ -191,7 +194,8 @@ def make_policy(spec: MethodSpec, snapshot: SnapshotRef) -> Policy:
             return OpenpiPolicy(spec.served, name=spec.name)
         return RemotePolicy(spec.served, name=spec.name)
     factory = resolve(spec.target, what=f"method {spec.name!r}")
-    policy = factory(snapshot.path) if spec.learned else factory()
+    options = dict(spec.options)
+    policy = factory(snapshot.path, **options) if spec.learned else factory(**options)
     if not isinstance(policy, Policy):
         raise UsageError(f"method {spec.name!r}: {spec.target} did not return a Policy")
     if is_privileged(policy) != spec.privileged:
@@ -260,24 +264,31 @@ def select_snapshots(spec: MethodSpec, checkpoints: Path | None, last_n: int) ->
     return refs
 
 
+_GT_WAYPOINTS = "awda_bench.policies.gt_waypoints:gt_waypoints"
+_AWDA = "awda_bench.policies.awda_policy:awda"
+_TOSVI = "awda_bench.policies.tosvi_policy:TosviPolicy"
+_CENTRE_RULE = "(the reference's rule; --grasp-select centre)"
+
 for _spec in (
     MethodSpec(
         "gt-waypoints",
-        "awda_bench.policies.gt_waypoints:GTWaypointsPolicy",
+        _GT_WAYPOINTS,
         privileged=True,
         description="privileged: ground-truth attributed waypoints executed by the primitives",
     ),
     MethodSpec(
         "gt-waypoints-k3",
-        "awda_bench.policies.gt_waypoints:gt_waypoints_k3",
+        _GT_WAYPOINTS,
         privileged=True,
         description="gt-waypoints with K = 3 waypoints (--num-waypoints 3)",
+        options=(("num_waypoints", 3),),
     ),
     MethodSpec(
         "gt-waypoints-k8",
-        "awda_bench.policies.gt_waypoints:gt_waypoints_k8",
+        _GT_WAYPOINTS,
         privileged=True,
         description="gt-waypoints with K = 8 waypoints (--num-waypoints 8)",
+        options=(("num_waypoints", 8),),
     ),
     MethodSpec(
         "scripted",
@@ -287,60 +298,66 @@ for _spec in (
     ),
     MethodSpec(
         "awda",
-        "awda_bench.policies.awda_policy:AWDAPolicy",
+        _AWDA,
         learned=True,
         description="learned: AWDA waypoint network snapshots (--checkpoints DIR) + motor primitives",
     ),
     MethodSpec(
         "gt-waypoints-centre",
-        "awda_bench.policies.gt_waypoints:gt_waypoints_centre",
+        _GT_WAYPOINTS,
         privileged=True,
-        description="gt-waypoints, grasps take the depth component nearest the image centre "
-        "(the reference's rule; --grasp-select centre)",
+        description=f"gt-waypoints, grasps take the depth component nearest the image centre {_CENTRE_RULE}",
+        options=(("grasp_select", "centre"),),
     ),
     MethodSpec(
         "awda-centre",
-        "awda_bench.policies.awda_policy:awda_centre",
+        _AWDA,
         learned=True,
-        description="awda, grasps take the depth component nearest the image centre "
-        "(the reference's rule; --grasp-select centre)",
+        description=f"awda, grasps take the depth component nearest the image centre {_CENTRE_RULE}",
+        options=(("grasp_select", "centre"),),
     ),
     MethodSpec(
         "tosvi",
-        "awda_bench.policies.tosvi_policy:tosvi",
+        _TOSVI,
         learned=True,
         description="learned: T-OSVI closed-loop snapshots (--checkpoints DIR; also the "
         "no-waypoints ablation), actions sampled from the mixture",
+        options=(("action_select", "sample"), ("arch", "tosvi")),
     ),
     MethodSpec(
         "tosvi-mean",
-        "awda_bench.policies.tosvi_policy:tosvi_mean",
+        _TOSVI,
         learned=True,
         description="tosvi with the mixture mean as the action (--action-select mean)",
+        options=(("action_select", "mean"), ("arch", "tosvi")),
     ),
     MethodSpec(
         "tosvi-mode",
-        "awda_bench.policies.tosvi_policy:tosvi_mode",
+        _TOSVI,
         learned=True,
         description="tosvi with the heaviest component's mean (--action-select mode)",
+        options=(("action_select", "mode"), ("arch", "tosvi")),
     ),
     MethodSpec(
         "tosvi-depth",
-        "awda_bench.policies.tosvi_policy:tosvi_depth",
+        _TOSVI,
         learned=True,
         description="learned: T-OSVI +depth snapshots (wrist depth, late fusion), sampled actions",
+        options=(("action_select", "sample"), ("arch", "tosvi-depth")),
     ),
     MethodSpec(
         "tosvi-depth-mean",
-        "awda_bench.policies.tosvi_policy:tosvi_depth_mean",
+        _TOSVI,
         learned=True,
         description="tosvi-depth with the mixture mean (--action-select mean)",
+        options=(("action_select", "mean"), ("arch", "tosvi-depth")),
     ),
     MethodSpec(
         "tosvi-depth-mode",
-        "awda_bench.policies.tosvi_policy:tosvi_depth_mode",
+        _TOSVI,
         learned=True,
         description="tosvi-depth with the heaviest component's mean (--action-select mode)",
+        options=(("action_select", "mode"), ("arch", "tosvi-depth")),
     ),
     MethodSpec(
         "random",

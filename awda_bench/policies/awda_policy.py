@@ -34,11 +34,16 @@ import numpy as np
 
 from awda_bench.data.trajectory_file import as_stored, trained_jpeg_quality
 from awda_bench.episode import EpisodeContext, observations_of
-from awda_bench.errors import CorruptFileError, UsageError
+from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
 from awda_bench.models.agent_cameras import camera_index, config_cameras
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig
-from awda_bench.primitives.config import CENTRE_SUFFIX, ExecutorConfig, LocalizationConfig
+from awda_bench.primitives.config import (
+    CENTRE_SUFFIX,
+    GRASP_SELECTS,
+    ExecutorConfig,
+    LocalizationConfig,
+)
 from awda_bench.primitives.executor import WaypointExecutor
 from awda_bench.primitives.robot_interface import RobotInterface, robot_interface_of
 from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION
@@ -172,11 +177,16 @@ class AWDAPolicy:
         return self._waypoints
 
 
-def awda_centre(snapshot: str | Path) -> AWDAPolicy:
-    """``awda`` whose grasps take the depth component nearest the wrist image's centre (the
-    reference's rule; ``awda`` follows the predicted grasp waypoint)."""
-    policy = AWDAPolicy(
-        snapshot, AWDAPolicyConfig(localization=replace(WRIST_LOCALIZATION, select="centre"))
-    )
+def awda(snapshot: str | Path, grasp_select: str = GRASP_SELECTS[0]) -> AWDAPolicy:
+    """The awda family (one method per setting, :mod:`awda_bench.evaluation.methods`): grasps
+    take the wrist depth component the predicted grasp waypoint points at (``waypoint``, ``awda``)
+    or the one nearest the wrist image's centre (``centre``, the reference's rule:
+    ``awda-centre``)."""
+    if grasp_select not in GRASP_SELECTS:
+        raise UnknownChoiceError("--grasp-select", grasp_select, GRASP_SELECTS)
+    if grasp_select == GRASP_SELECTS[0]:
+        return AWDAPolicy(snapshot)
+    localization = replace(WRIST_LOCALIZATION, select=grasp_select)
+    policy = AWDAPolicy(snapshot, AWDAPolicyConfig(localization=localization))
     policy.name = "awda" + CENTRE_SUFFIX
     return policy

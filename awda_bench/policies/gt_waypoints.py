@@ -22,15 +22,21 @@ actions). Mining, extraction and the executor are the same code on both.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
 
 from awda_bench.episode import EpisodeContext, EpisodeSpec, Policy
+from awda_bench.errors import UnknownChoiceError
 from awda_bench.mining import GraspMiningConfig, PressMiningConfig, mine_grasp, mine_press
 from awda_bench.primitives.base import RobotState
-from awda_bench.primitives.config import CENTRE_SUFFIX, ExecutorConfig, LocalizationConfig
+from awda_bench.primitives.config import (
+    CENTRE_SUFFIX,
+    GRASP_SELECTS,
+    ExecutorConfig,
+    LocalizationConfig,
+)
 from awda_bench.primitives.executor import WaypointExecutor
 from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION, WristLocator
 from awda_bench.trajectory import Trajectory
@@ -342,26 +348,18 @@ def gt_waypoints_method_name(num_waypoints: int) -> str:
     return "gt-waypoints" if num_waypoints == 5 else f"gt-waypoints-k{num_waypoints}"
 
 
-def gt_waypoints_k3() -> GTWaypointsPolicy:
-    """``gt-waypoints`` with K = 3."""
-    policy = GTWaypointsPolicy(GTWaypointsConfig(num_waypoints=3))
-    policy.name = gt_waypoints_method_name(3)
-    return policy
-
-
-def gt_waypoints_k8() -> GTWaypointsPolicy:
-    """``gt-waypoints`` with K = 8."""
-    policy = GTWaypointsPolicy(GTWaypointsConfig(num_waypoints=8))
-    policy.name = gt_waypoints_method_name(8)
-    return policy
-
-
-def gt_waypoints_centre() -> GTWaypointsPolicy:
-    """``gt-waypoints`` whose grasps take the depth component nearest the wrist image's centre
-    (the reference's rule; ``gt-waypoints`` follows the grasp waypoint)."""
-    from dataclasses import replace
-
-    config = GTWaypointsConfig(localization=replace(WRIST_LOCALIZATION, select="centre"))
+def gt_waypoints(num_waypoints: int = 5, grasp_select: str = GRASP_SELECTS[0]) -> GTWaypointsPolicy:
+    """The gt-waypoints family (one method per setting, :mod:`awda_bench.evaluation.methods`): K
+    waypoints (``gt-waypoints-k3``, ``-k8``; the paper's 5 by default), and grasps that take the
+    wrist depth component the grasp waypoint points at (``waypoint``) or the one nearest the
+    wrist image's centre (``centre``, the reference's rule: ``gt-waypoints-centre``)."""
+    if grasp_select not in GRASP_SELECTS:
+        raise UnknownChoiceError("--grasp-select", grasp_select, GRASP_SELECTS)
+    config = GTWaypointsConfig(num_waypoints=num_waypoints)
+    if grasp_select != GRASP_SELECTS[0]:
+        config = replace(config, localization=replace(WRIST_LOCALIZATION, select=grasp_select))
     policy = GTWaypointsPolicy(config)
-    policy.name = "gt-waypoints" + CENTRE_SUFFIX
+    policy.name = gt_waypoints_method_name(num_waypoints) + (
+        CENTRE_SUFFIX if grasp_select == "centre" else ""
+    )
     return policy

@@ -210,29 +210,3 @@ class TosviPolicy:
     @property
     def waypoints(self) -> np.ndarray | None:
         return None
-
-
-def tosvi(snapshot: str | Path) -> TosviPolicy:
-    """``tosvi``: a ``tosvi`` snapshot (T-OSVI, or the ``no-waypoints`` ablation), sampled actions."""
-    return TosviPolicy(snapshot, "sample", arch="tosvi")
-
-
-def tosvi_mean(snapshot: str | Path) -> TosviPolicy:
-    return TosviPolicy(snapshot, "mean", arch="tosvi")
-
-
-def tosvi_mode(snapshot: str | Path) -> TosviPolicy:
-    return TosviPolicy(snapshot, "mode", arch="tosvi")
-
-
-def tosvi_depth(snapshot: str | Path) -> TosviPolicy:
-    """``tosvi-depth``: a ``tosvi-depth`` snapshot, sampled actions."""
-    return TosviPolicy(snapshot, "sample", arch="tosvi-depth")
-
-
-def tosvi_depth_mean(snapshot: str | Path) -> TosviPolicy:
-    return TosviPolicy(snapshot, "mean", arch="tosvi-depth")
-
-
-def tosvi_depth_mode(snapshot: str | Path) -> TosviPolicy:
-    return TosviPolicy(snapshot, "mode", arch="tosvi-depth")
