@@ -48,6 +48,24 @@ def open_connection(url: str, timeout_s: float, start_hint: str) -> ClientConnec
     return connection
 
 
+def open_with_greeting(
+    url: str, timeout_s: float, start_hint: str, *, silence: str, hint: str
+) -> tuple[ClientConnection, bytes | str]:
+    """A connection to ``url`` (the caller closes it) and the first message its server sends (a
+    hello, metadata). When the server hangs up or sends nothing within ``timeout_s`` the
+    connection is closed and the error says the server accepted it but ``silence`` (``"said
+    nothing"``, ...), then ``hint``."""
+    connection = open_connection(url, timeout_s, start_hint)
+    try:
+        return connection, connection.recv(timeout=timeout_s)
+    except (TimeoutError, ConnectionClosed) as exc:
+        connection.close()
+        raise RemotePolicyError(
+            f"{server_peer(url)} accepted the connection but {silence} ({type(exc).__name__}); "
+            f"{hint}"
+        ) from exc
+
+
 def receive(connection: ClientConnection, timeout_s: float, peer: str, during: str) -> bytes | str:
     """The next message from ``peer``; waiting longer than ``timeout_s`` is an error."""
     try:

@@ -29,7 +29,12 @@ from websockets.sync.client import ClientConnection
 
 from awda_bench.episode import EpisodeContext, EpisodeSpec, Observations, observations_of
 from awda_bench.errors import RemotePolicyError
-from awda_bench.serving.connection import lost_connection, open_connection, receive, server_peer
+from awda_bench.serving.connection import (
+    lost_connection,
+    open_with_greeting,
+    receive,
+    server_peer,
+)
 from awda_bench.serving.openpi_schema import (
     ACTIONS,
     DONE,
@@ -59,15 +64,9 @@ NOT_OPENPI = "is it an openpi policy server?"
 def _open(url: str, timeout_s: float) -> tuple[ClientConnection, dict[str, Any], ServerInfo]:
     """Connect and read the server's metadata."""
     peer = server_peer(url)
-    connection = open_connection(url, timeout_s, START_HINT)
-    try:
-        data = connection.recv(timeout=timeout_s)
-    except (TimeoutError, ConnectionClosed) as exc:
-        connection.close()
-        raise RemotePolicyError(
-            f"{peer} accepted the connection but sent no metadata ({type(exc).__name__}); "
-            f"{NOT_OPENPI}"
-        ) from exc
+    connection, data = open_with_greeting(
+        url, timeout_s, START_HINT, silence="sent no metadata", hint=NOT_OPENPI
+    )
     try:
         if isinstance(data, str):
             last = (data.strip().splitlines() or [""])[-1].strip()

@@ -23,7 +23,7 @@ from awda_bench.errors import RemotePolicyError
 from awda_bench.serving.connection import (
     DEFAULT_TIMEOUT_S,
     lost_connection,
-    open_connection,
+    open_with_greeting,
     receive,
     server_peer,
 )
@@ -71,15 +71,13 @@ class ServedMethod:
 def _open(url: str, timeout_s: float) -> tuple[ClientConnection, ServerInfo]:
     """Connect and read the server's hello."""
     peer = server_peer(url)
-    connection = open_connection(url, timeout_s, START_HINT)
-    try:
-        data = connection.recv(timeout=timeout_s)
-    except (TimeoutError, ConnectionClosed) as exc:
-        connection.close()
-        raise RemotePolicyError(
-            f"{peer} accepted the connection but said nothing ({type(exc).__name__}); is it "
-            "`python -m awda_bench serve`?"
-        ) from exc
+    connection, data = open_with_greeting(
+        url,
+        timeout_s,
+        START_HINT,
+        silence="said nothing",
+        hint="is it `python -m awda_bench serve`?",
+    )
     try:
         hello = decode(data, peer=peer, hint=NOT_OURS) if isinstance(data, bytes) else None
     except RemotePolicyError:
