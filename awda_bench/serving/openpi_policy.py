@@ -49,6 +49,7 @@ from awda_bench.serving.protocol import OPENPI, PROTOCOL, ServerInfo
 from awda_bench.serving.remote_policy import (
     ACTION_DIM,
     ServedMethod,
+    ServedPolicyClient,
     check_actions,
     check_still_served,
 )
@@ -97,16 +98,11 @@ def _is_action_shape(shape: tuple[int, ...]) -> bool:
     return shape == (ACTION_DIM,) or (len(shape) == 2 and shape[1] == ACTION_DIM)
 
 
-class OpenpiPolicy:
+class OpenpiPolicy(ServedPolicyClient):
     """A policy played by the openpi server at ``served.url``; named ``name`` in the store."""
 
-    privileged = False
-
     def __init__(self, served: ServedMethod, name: str | None = None) -> None:
-        self.served = served
-        self.name = name or served.info.method
-        self._peer = server_peer(served.url)
-        self._connection: ClientConnection | None = None
+        super().__init__(served, name)
         self._metadata: dict[str, Any] = {}
         self._options = OpenpiOptions()
         self._observations: Observations | None = None
@@ -114,7 +110,6 @@ class OpenpiPolicy:
         self._step = 0
         self._chunk: list[np.ndarray] = []
         self._server_done = False
-        self._waypoints: np.ndarray | None = None
         self._requests = 0
         self._timing: dict[str, list[float]] = {}
 
@@ -126,18 +121,10 @@ class OpenpiPolicy:
         self._options = OpenpiOptions.from_metadata(metadata, self._peer)
         return connection
 
-    def close(self) -> None:
-        """Close the connection (the next request opens a new one)."""
-        if self._connection is not None:
-            self._connection.close()
-            self._connection = None
-
     # ------------------------------------------------------------------ requests
     def _exchange(self, during: str) -> dict[str, Any]:
         """Send the request for the current step; the server's reply."""
-        if self._connection is None:
-            self._connection = self._connect()
-        connection = self._connection
+        connection = self._open_connection()
         assert self._observations is not None and self._spec is not None
         request = observation_request(self._observations, self._spec, self._step, self._options)
         try:
@@ -216,10 +203,6 @@ class OpenpiPolicy:
     @property
     def done(self) -> bool:
         return self._server_done and not self._chunk
-
-    @property
-    def waypoints(self) -> np.ndarray | None:
-        return self._waypoints
 
     @property
     def server_notes(self) -> dict[str, Any]:

@@ -148,8 +148,11 @@ def check_still_served(
         )
 
 
-class RemotePolicy:
-    """A policy played by the server at ``served.url``; named ``name`` in the store."""
+class ServedPolicyClient:
+    """The harness's side of a served policy in either protocol (:class:`RemotePolicy`,
+    :class:`~.openpi_policy.OpenpiPolicy`): the served method, its name in the store, the
+    connection (opened when first needed by the protocol's :meth:`_connect`) and the waypoints
+    the server last sent."""
 
     privileged = False
 
@@ -158,9 +161,36 @@ class RemotePolicy:
         self.name = name or served.info.method
         self._peer = server_peer(served.url)
         self._connection: ClientConnection | None = None
+        self._waypoints: np.ndarray | None = None
+
+    def _connect(self) -> ClientConnection:
+        """A new connection to the server, refused unless it still serves ``served.info``."""
+        raise NotImplementedError
+
+    def _open_connection(self) -> ClientConnection:
+        """The connection, opened with :meth:`_connect` when there is none."""
+        if self._connection is None:
+            self._connection = self._connect()
+        return self._connection
+
+    def close(self) -> None:
+        """Close the connection (the next request opens a new one)."""
+        if self._connection is not None:
+            self._connection.close()
+            self._connection = None
+
+    @property
+    def waypoints(self) -> np.ndarray | None:
+        return self._waypoints
+
+
+class RemotePolicy(ServedPolicyClient):
+    """A policy played by the server at ``served.url``; named ``name`` in the store."""
+
+    def __init__(self, served: ServedMethod, name: str | None = None) -> None:
+        super().__init__(served, name)
         self._observations: Observations | None = None
         self._done = False
-        self._waypoints: np.ndarray | None = None
         self._step = 0
 
     # ------------------------------------------------------------------ connection
@@ -168,12 +198,6 @@ class RemotePolicy:
         connection, info = _open(self.served.url, self.served.timeout_s)
         check_still_served(connection, info, self.served.info, self._peer)
         return connection
-
-    def close(self) -> None:
-        """Close the connection (the next ``reset`` opens a new one)."""
-        if self._connection is not None:
-            self._connection.close()
-            self._connection = None
 
     # ------------------------------------------------------------------ exchanges
     def _answer(self, connection: ClientConnection, request: dict[str, Any]) -> None:
@@ -198,9 +222,7 @@ class RemotePolicy:
 
     def _exchange(self, message: dict[str, Any], expect: str, during: str) -> dict[str, Any]:
         """Send ``message``, answer observation requests, return the ``expect`` reply."""
-        if self._connection is None:
-            self._connection = self._connect()
-        connection = self._connection
+        connection = self._open_connection()
         try:
             connection.send(pack(message))
             while True:
@@ -257,10 +279,6 @@ class RemotePolicy:
     @property
     def done(self) -> bool:
         return self._done
-
-    @property
-    def waypoints(self) -> np.ndarray | None:
-        return self._waypoints
 
 
 class _ServedPolicyRaised(RemotePolicyError):
