@@ -1,8 +1,10 @@
 """What every scripted expert shares: a per-env phase machine acting by straight-line TCP steps.
 
 An expert subclass names its phases (an ``IntEnum`` with ``start_phase``/``done_phase``), keeps
-its per-env extras in :meth:`PhaseExpert._reset_state`, and in ``act`` advances each env's phase
-and picks a goal; :func:`straight_line_action` turns goals into the embodiment's 4-D actions.
+its per-env extras in :meth:`PhaseExpert._reset_state`, reads where things are
+(:meth:`PhaseExpert.read_scene`), and per env advances the phase (:meth:`PhaseExpert._advance`)
+and sets the phase's goal (:meth:`PhaseExpert._set_goal`); :meth:`PhaseExpert.act` runs them
+every step and :func:`straight_line_action` turns the goals into the embodiment's 4-D actions.
 """
 
 from __future__ import annotations
@@ -77,6 +79,8 @@ class PhaseExpert:
     """Phase every env starts an episode in."""
     done_phase: ClassVar[int]
     """Phase meaning "finished"; the expert is done when every env is in it."""
+    grip_closed_phases: ClassVar[frozenset[int]] = frozenset()
+    """Phases during which the gripper is commanded closed (see :meth:`_grip_closed`)."""
 
     def __init__(self, config: Any, name: str = "scripted") -> None:
         self.config = config
@@ -96,6 +100,37 @@ class PhaseExpert:
 
     def _reset_state(self, n: int) -> None:
         """Reset the subclass's per-env extras for ``n`` envs (``self._env`` is set)."""
+
+    def read_scene(self, env: Any, tcp: np.ndarray) -> Any:
+        """Where things are, per env, for the current state (``tcp``: (n, 3) [m])."""
+        raise NotImplementedError
+
+    def _advance(self, i: int, tcp: np.ndarray, scene: Any) -> None:
+        """Move env ``i`` to its next phase once the current one is finished (one per step)."""
+        raise NotImplementedError
+
+    def _set_goal(self, i: int, tcp: np.ndarray, scene: Any, goal: np.ndarray) -> None:
+        """Set env ``i``'s TCP goal (3,) [m] for its current phase in ``goal``, which holds the
+        TCP (``tcp``) on entry: a phase that leaves it holds position."""
+        raise NotImplementedError
+
+    def _grip_closed(self) -> np.ndarray:
+        """(n,) bool: the gripper is commanded closed (in :attr:`grip_closed_phases`)."""
+        return np.isin(self.phase, [int(p) for p in self.grip_closed_phases])
+
+    def act(self, obs: Any) -> np.ndarray:
+        """(n, 4) action for the loaded embodiment: straight-line step towards the phase goal."""
+        if self._env is None:
+            raise RuntimeError("act() before reset(ctx)")
+        env = self._env
+        tcp = env.agent.tcp_pose.p.cpu().numpy().astype(np.float64)
+        scene = self.read_scene(env, tcp)
+        goal = tcp.copy()
+        for i in range(len(tcp)):
+            self._advance(i, tcp[i], scene)
+            self._set_goal(i, tcp[i], scene, goal[i])
+            self.phase_steps[i] += 1
+        return straight_line_action(goal, tcp, self._grip_closed(), env)
 
     @property
     def done(self) -> bool:

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.experts.base import PhaseExpert, check_config, straight_line_action
+from awda_bench.experts.base import PhaseExpert, check_config
 
 
 class HandlePhase(IntEnum):
@@ -117,43 +117,34 @@ class HandleExpert(PhaseExpert):
         self._retreat_z = np.zeros(n)
         self._grip_offset = np.zeros((n, 3))
 
-    def act(self, obs: Any) -> np.ndarray:
-        """(n, 4) action for the loaded embodiment: straight-line step towards the phase goal."""
-        if self._env is None:
-            raise RuntimeError("act() before reset(ctx)")
-        env = self._env
-        tcp = env.agent.tcp_pose.p.cpu().numpy().astype(np.float64)
-        scene = self.read_scene(env, tcp)
-        goal = tcp.copy()
-        for i in range(len(tcp)):
-            self._advance(i, tcp[i], scene)
-            phase = HandlePhase(self.phase[i])
-            if phase == HandlePhase.HOVER:
-                goal[i] = (scene.work_xy[i, 0], scene.work_xy[i, 1], scene.hover_z[i])
-                if tcp[i, 2] < scene.rise_below_z[i]:  # rise before crossing sideways
-                    goal[i, :2] = tcp[i, :2]
-            elif phase == HandlePhase.DESCEND:
-                goal[i] = (scene.work_xy[i, 0], scene.work_xy[i, 1], scene.work_z[i])
-            elif phase == HandlePhase.MOVE:
-                if self.pull[i]:  # the grasp point on the handle, led along the path
-                    goal[i] = scene.pull_goal[i] + self._grip_offset[i]
-                else:
-                    goal[i, :2] = scene.push_goal[i]
-                goal[i, 2] = scene.work_z[i]
-            elif phase == HandlePhase.RETREAT:
-                goal[i, 2] = self._retreat_z[i]
-            # CLOSE, RELEASE, DONE: hold position
-            self.phase_steps[i] += 1
-        closed = np.where(
+    def _set_goal(self, i: int, tcp: np.ndarray, scene: HandleScene, goal: np.ndarray) -> None:
+        phase = HandlePhase(self.phase[i])
+        if phase == HandlePhase.HOVER:
+            goal[:] = (scene.work_xy[i, 0], scene.work_xy[i, 1], scene.hover_z[i])
+            if tcp[2] < scene.rise_below_z[i]:  # rise before crossing sideways
+                goal[:2] = tcp[:2]
+        elif phase == HandlePhase.DESCEND:
+            goal[:] = (scene.work_xy[i, 0], scene.work_xy[i, 1], scene.work_z[i])
+        elif phase == HandlePhase.MOVE:
+            if self.pull[i]:  # the grasp point on the handle, led along the path
+                goal[:] = scene.pull_goal[i] + self._grip_offset[i]
+            else:
+                goal[:2] = scene.push_goal[i]
+            goal[2] = scene.work_z[i]
+        elif phase == HandlePhase.RETREAT:
+            goal[2] = self._retreat_z[i]
+        # CLOSE, RELEASE, DONE: hold position
+
+    def _grip_closed(self) -> np.ndarray:
+        """Opening: closed in CLOSE and MOVE; closing: closed until RETREAT."""
+        return np.where(
             self.pull,
             np.isin(self.phase, [int(p) for p in _GRIP_CLOSED_OPENING]),
             self.phase < HandlePhase.RETREAT,
         )
-        return straight_line_action(goal, tcp, closed, env)
 
     # ------------------------------------------------------------------ phase logic
     def _advance(self, i: int, tcp: np.ndarray, scene: HandleScene) -> None:
-        """Move env ``i`` to its next phase once the current one is finished (one per step)."""
         cfg = self.config
         phase = HandlePhase(self.phase[i])
         over_budget = self.phase_steps[i] >= cfg.phase_budget_steps

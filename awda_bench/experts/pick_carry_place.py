@@ -27,12 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.experts.base import (
-    PICK_GRIP_CLOSED,
-    PhaseExpert,
-    check_config,
-    straight_line_action,
-)
+from awda_bench.experts.base import PICK_GRIP_CLOSED, PhaseExpert, check_config
 from awda_bench.experts.base import PickPhase as Phase
 
 
@@ -100,6 +95,7 @@ class PickCarryPlaceExpert(PhaseExpert):
     config: PickCarryPlaceConfig
     start_phase = Phase.HOVER
     done_phase = Phase.DONE
+    grip_closed_phases = PICK_GRIP_CLOSED
 
     def __init__(self, config: PickCarryPlaceConfig, name: str = "scripted") -> None:
         super().__init__(config, name)
@@ -115,39 +111,26 @@ class PickCarryPlaceExpert(PhaseExpert):
         self._carry_z = np.full(n, self.config.min_carry_z_m)
         self._release_z = np.zeros(n)
 
-    def act(self, obs: Any) -> np.ndarray:
-        """(n, 4) action for the loaded embodiment: straight-line step towards the phase goal."""
-        if self._env is None:
-            raise RuntimeError("act() before reset(ctx)")
-        env, cfg = self._env, self.config
-        tcp = env.agent.tcp_pose.p.cpu().numpy().astype(np.float64)
-        scene = self.read_scene(env, tcp)
+    def _set_goal(self, i: int, tcp: np.ndarray, scene: PickScene, goal: np.ndarray) -> None:
+        phase = Phase(self.phase[i])
         # where the TCP must be for the *held reference* to be over the place point
-        aim_xy = scene.place_xy + (tcp[:, :2] - scene.held[:, :2])
-        goal = tcp.copy()
-        for i in range(len(tcp)):
-            self._advance(i, tcp[i], scene)
-            phase = Phase(self.phase[i])
-            if phase == Phase.HOVER:
-                goal[i] = (scene.grasp[i, 0], scene.grasp[i, 1], max(scene.hover_z[i], tcp[i, 2]))
-            elif phase == Phase.DESCEND:
-                goal[i] = scene.grasp[i]
-            elif phase == Phase.LIFT:
-                goal[i, 2] = self._carry_z[i]
-            elif phase == Phase.CARRY:
-                goal[i] = (aim_xy[i, 0], aim_xy[i, 1], self._carry_z[i])
-            elif phase == Phase.LOWER:
-                goal[i] = (aim_xy[i, 0], aim_xy[i, 1], self._release_z[i])
-            elif phase == Phase.RETREAT:
-                goal[i, 2] = self._release_z[i] + cfg.retreat_m
-            # CLOSE, RELEASE, DONE: hold position
-            self.phase_steps[i] += 1
-        closed = np.isin(self.phase, [int(p) for p in PICK_GRIP_CLOSED])
-        return straight_line_action(goal, tcp, closed, env)
+        aim_xy = scene.place_xy[i] + (tcp[:2] - scene.held[i, :2])
+        if phase == Phase.HOVER:
+            goal[:] = (scene.grasp[i, 0], scene.grasp[i, 1], max(scene.hover_z[i], tcp[2]))
+        elif phase == Phase.DESCEND:
+            goal[:] = scene.grasp[i]
+        elif phase == Phase.LIFT:
+            goal[2] = self._carry_z[i]
+        elif phase == Phase.CARRY:
+            goal[:] = (aim_xy[0], aim_xy[1], self._carry_z[i])
+        elif phase == Phase.LOWER:
+            goal[:] = (aim_xy[0], aim_xy[1], self._release_z[i])
+        elif phase == Phase.RETREAT:
+            goal[2] = self._release_z[i] + self.config.retreat_m
+        # CLOSE, RELEASE, DONE: hold position
 
     # ------------------------------------------------------------------ phase logic
     def _advance(self, i: int, tcp: np.ndarray, scene: PickScene) -> None:
-        """Move env ``i`` to its next phase once the current one is finished (one per step)."""
         cfg = self.config
         phase = Phase(self.phase[i])
         over_budget = self.phase_steps[i] >= cfg.phase_budget_steps

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.experts.base import PhaseExpert, check_config, straight_line_action
+from awda_bench.experts.base import PhaseExpert, check_config
 
 
 class Phase(IntEnum):
@@ -36,8 +36,24 @@ class Phase(IntEnum):
     DONE = 5
 
 
-_GRIP_CLOSED = {Phase.CLOSE, Phase.PRESS, Phase.HOLD, Phase.RELEASE}
+_GRIP_CLOSED = frozenset({Phase.CLOSE, Phase.PRESS, Phase.HOLD, Phase.RELEASE})
 """Phases during which the gripper is commanded closed (fingers shut: a blunt pusher)."""
+
+
+@dataclass(frozen=True)
+class PressScene:
+    """Where things are, per env (arrays over the envs), read from the state every step."""
+
+    cap: np.ndarray
+    """(n, 3) the target cap's top at rest [m]."""
+    depth: np.ndarray
+    """(n,) how far the target button is pressed in [m]."""
+    travel_m: float
+    """The buttons' full travel [m]."""
+    hover_z: np.ndarray
+    """(n,) TCP height of HOVER and RELEASE [m]."""
+    press_z: np.ndarray
+    """(n,) TCP height PRESS and HOLD aim at [m]."""
 
 
 @dataclass(frozen=True)
@@ -87,6 +103,7 @@ class PressButtonExpert(PhaseExpert):
     config: PressButtonExpertConfig
     start_phase = Phase.HOVER
     done_phase = Phase.DONE
+    grip_closed_phases = _GRIP_CLOSED
 
     def __init__(
         self, config: PressButtonExpertConfig | None = None, name: str = "scripted"
@@ -94,40 +111,34 @@ class PressButtonExpert(PhaseExpert):
         super().__init__(config or PressButtonExpertConfig(), name)
 
     # ------------------------------------------------------------------ Policy protocol
-    def act(self, obs: Any) -> np.ndarray:
-        """(n, 4) action for the loaded embodiment: straight-line step towards the phase goal."""
-        if self._env is None:
-            raise RuntimeError("act() before reset(ctx)")
-        env, cfg = self._env, self.config
+    def read_scene(self, env: Any, tcp: np.ndarray) -> PressScene:
+        cfg = self.config
         lay = env.layout
-        tcp = env.agent.tcp_pose.p.cpu().numpy().astype(np.float64)
         cap = env.target_rest_cap_top().cpu().numpy().astype(np.float64)
         depth = env.target_depth_m().cpu().numpy().astype(np.float64)
-        hover_z = cap[:, 2] + cfg.hover_clearance_m
-        press_z = cap[:, 2] - lay.travel_m + cfg.fingertip_below_tcp_m - cfg.overshoot_m
+        return PressScene(
+            cap=cap,
+            depth=depth,
+            travel_m=lay.travel_m,
+            hover_z=cap[:, 2] + cfg.hover_clearance_m,
+            press_z=cap[:, 2] - lay.travel_m + cfg.fingertip_below_tcp_m - cfg.overshoot_m,
+        )
 
-        goal = tcp.copy()
-        for i in range(len(tcp)):
-            self._advance(i, tcp[i], cap[i], hover_z[i], depth[i], lay.travel_m)
-            phase = Phase(self.phase[i])
-            if phase == Phase.HOVER:
-                goal[i] = (cap[i, 0], cap[i, 1], hover_z[i])
-            elif phase in (Phase.PRESS, Phase.HOLD):
-                goal[i] = (cap[i, 0], cap[i, 1], press_z[i])
-            elif phase == Phase.RELEASE:
-                goal[i] = (cap[i, 0], cap[i, 1], hover_z[i])
-            # CLOSE, DONE: hold position
-            self.phase_steps[i] += 1
-
-        closed = np.isin(self.phase, [int(p) for p in _GRIP_CLOSED])
-        return straight_line_action(goal, tcp, closed, env)
+    def _set_goal(self, i: int, tcp: np.ndarray, scene: PressScene, goal: np.ndarray) -> None:
+        phase = Phase(self.phase[i])
+        cap = scene.cap[i]
+        if phase == Phase.HOVER:
+            goal[:] = (cap[0], cap[1], scene.hover_z[i])
+        elif phase in (Phase.PRESS, Phase.HOLD):
+            goal[:] = (cap[0], cap[1], scene.press_z[i])
+        elif phase == Phase.RELEASE:
+            goal[:] = (cap[0], cap[1], scene.hover_z[i])
+        # CLOSE, DONE: hold position
 
     # ------------------------------------------------------------------ phase logic
-    def _advance(
-        self, i: int, tcp: np.ndarray, cap: np.ndarray, hover_z: float, depth: float, travel: float
-    ) -> None:
-        """Move env ``i`` to its next phase once the current one is finished (one per step)."""
+    def _advance(self, i: int, tcp: np.ndarray, scene: PressScene) -> None:
         cfg = self.config
+        cap, hover_z, depth, travel = scene.cap[i], scene.hover_z[i], scene.depth[i], scene.travel_m
         phase = Phase(self.phase[i])
         steps = self.phase_steps[i]
         over_budget = steps >= cfg.phase_budget_steps
