@@ -9,6 +9,7 @@ every step and :func:`straight_line_action` turns the goals into the embodiment'
 
 from __future__ import annotations
 
+from collections.abc import Collection
 from enum import IntEnum
 from typing import Any, ClassVar
 
@@ -79,7 +80,7 @@ class PhaseExpert:
     """Phase every env starts an episode in."""
     done_phase: ClassVar[int]
     """Phase meaning "finished"; the expert is done when every env is in it."""
-    grip_closed_phases: ClassVar[frozenset[int]] = frozenset()
+    grip_closed_phases: ClassVar[Collection[int]] = ()
     """Phases during which the gripper is commanded closed (see :meth:`_grip_closed`)."""
 
     def __init__(self, config: Any, name: str = "scripted") -> None:

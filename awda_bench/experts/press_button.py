@@ -36,7 +36,7 @@ class Phase(IntEnum):
     DONE = 5
 
 
-_GRIP_CLOSED = frozenset({Phase.CLOSE, Phase.PRESS, Phase.HOLD, Phase.RELEASE})
+_GRIP_CLOSED = {Phase.CLOSE, Phase.PRESS, Phase.HOLD, Phase.RELEASE}
 """Phases during which the gripper is commanded closed (fingers shut: a blunt pusher)."""
 
 
