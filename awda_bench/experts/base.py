@@ -82,9 +82,11 @@ class PhaseExpert:
     """Phase meaning "finished"; the expert is done when every env is in it."""
     grip_closed_phases: ClassVar[Collection[int]] = ()
     """Phases during which the gripper is commanded closed (see :meth:`_grip_closed`)."""
+    config_type: ClassVar[type[Any]]
+    """The config of an expert built without one (its defaults)."""
 
-    def __init__(self, config: Any, name: str = "scripted") -> None:
-        self.config = config
+    def __init__(self, config: Any = None, name: str = "scripted") -> None:
+        self.config = config or self.config_type()
         self.name = name
         self._env: Any = None
         self.phase = np.zeros(0, dtype=np.int64)

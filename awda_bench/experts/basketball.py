@@ -45,11 +45,7 @@ class BasketballExpert(PickCarryPlaceExpert):
     """Scripted expert of the ``basketball`` family; batched over envs."""
 
     config: BasketballExpertConfig
-
-    def __init__(
-        self, config: BasketballExpertConfig | None = None, name: str = "scripted"
-    ) -> None:
-        super().__init__(config or BasketballExpertConfig(), name)
+    config_type = BasketballExpertConfig
 
     def read_scene(self, env: Any, tcp: np.ndarray) -> PickScene:
         cfg = self.config

@@ -72,9 +72,7 @@ class DoorExpert(HandleExpert):
     """Scripted expert of the ``door`` family (``AWDA-Door-v1``); batched over envs."""
 
     config: DoorExpertConfig
-
-    def __init__(self, config: DoorExpertConfig | None = None, name: str = "scripted") -> None:
-        super().__init__(config or DoorExpertConfig(), name)
+    config_type = DoorExpertConfig
 
     def read_scene(self, env: Any, tcp: np.ndarray) -> HandleScene:
         cfg = self.config

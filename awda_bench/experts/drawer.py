@@ -56,9 +56,7 @@ class DrawerExpert(HandleExpert):
     """Scripted expert of the ``drawer`` family (``AWDA-Drawer-v1``); batched over envs."""
 
     config: DrawerExpertConfig
-
-    def __init__(self, config: DrawerExpertConfig | None = None, name: str = "scripted") -> None:
-        super().__init__(config or DrawerExpertConfig(), name)
+    config_type = DrawerExpertConfig
 
     def read_scene(self, env: Any, tcp: np.ndarray) -> HandleScene:
         cfg = self.config

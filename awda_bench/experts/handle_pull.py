@@ -98,8 +98,9 @@ class HandleExpert(PhaseExpert):
     config: HandleConfig
     start_phase = HandlePhase.HOVER
     done_phase = HandlePhase.DONE
+    config_type = HandleConfig
 
-    def __init__(self, config: HandleConfig, name: str = "scripted") -> None:
+    def __init__(self, config: HandleConfig | None = None, name: str = "scripted") -> None:
         super().__init__(config, name)
         self.pull = np.zeros(0, dtype=bool)
         """(n,) True: open by grasping and pulling; False: close by pushing."""

@@ -50,11 +50,7 @@ class NutAssemblyExpert(PickCarryPlaceExpert):
     """Scripted expert of the ``nut_assembly`` family; batched over envs."""
 
     config: NutAssemblyExpertConfig
-
-    def __init__(
-        self, config: NutAssemblyExpertConfig | None = None, name: str = "scripted"
-    ) -> None:
-        super().__init__(config or NutAssemblyExpertConfig(), name)
+    config_type = NutAssemblyExpertConfig
 
     def read_scene(self, env: Any, tcp: np.ndarray) -> PickScene:
         cfg = self.config

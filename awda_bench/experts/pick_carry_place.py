@@ -96,8 +96,9 @@ class PickCarryPlaceExpert(PhaseExpert):
     start_phase = Phase.HOVER
     done_phase = Phase.DONE
     grip_closed_phases = PICK_GRIP_CLOSED
+    config_type = PickCarryPlaceConfig
 
-    def __init__(self, config: PickCarryPlaceConfig, name: str = "scripted") -> None:
+    def __init__(self, config: PickCarryPlaceConfig | None = None, name: str = "scripted") -> None:
         super().__init__(config, name)
         self._carry_z = np.zeros(0)
         self._release_z = np.zeros(0)

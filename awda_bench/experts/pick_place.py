@@ -48,9 +48,7 @@ class PickPlaceExpert(PickCarryPlaceExpert):
     """Scripted expert of the ``pick_place`` suite (the ``scripted`` method); batched over envs."""
 
     config: PickPlaceExpertConfig
-
-    def __init__(self, config: PickPlaceExpertConfig | None = None, name: str = "scripted") -> None:
-        super().__init__(config or PickPlaceExpertConfig(), name)
+    config_type = PickPlaceExpertConfig
 
     def read_scene(self, env: Any, tcp: np.ndarray) -> PickScene:
         cfg = self.config

@@ -101,14 +101,10 @@ class PressButtonExpert(PhaseExpert):
     """Scripted expert of the ``press_button`` family (``AWDA-PressButton-v1``), batched."""
 
     config: PressButtonExpertConfig
+    config_type = PressButtonExpertConfig
     start_phase = Phase.HOVER
     done_phase = Phase.DONE
     grip_closed_phases = _GRIP_CLOSED
-
-    def __init__(
-        self, config: PressButtonExpertConfig | None = None, name: str = "scripted"
-    ) -> None:
-        super().__init__(config or PressButtonExpertConfig(), name)
 
     # ------------------------------------------------------------------ Policy protocol
     def read_scene(self, env: Any, tcp: np.ndarray) -> PressScene:

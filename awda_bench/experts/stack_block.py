@@ -45,11 +45,7 @@ class StackBlockExpert(PickCarryPlaceExpert):
     """Scripted expert of the ``stack_block`` family (``AWDA-StackBlock-v1``); batched over envs."""
 
     config: StackBlockExpertConfig
-
-    def __init__(
-        self, config: StackBlockExpertConfig | None = None, name: str = "scripted"
-    ) -> None:
-        super().__init__(config or StackBlockExpertConfig(), name)
+    config_type = StackBlockExpertConfig
 
     def read_scene(self, env: Any, tcp: np.ndarray) -> PickScene:
         cfg = self.config
