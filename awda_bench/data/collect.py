@@ -304,14 +304,17 @@ def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> Colle
             if runner is None and config.backend == "ray":
                 from awda_bench.data.ray_runner import RayJobRunner
 
-                with RayJobRunner(config, config.workers, address=config.ray_address) as ray_runner:
+                simulator = plan.suite.simulator
+                with RayJobRunner(
+                    config, simulator, config.workers, address=config.ray_address
+                ) as ray_runner:
                     ray_runner.run(jobs, on_result)
             else:
                 if runner is None:
                     runner = (
                         InlineRunner(config)
                         if config.workers == 0
-                        else ProcessRunner(config, config.workers)
+                        else ProcessRunner(config, plan.suite.simulator, config.workers)
                     )
                 runner.run(jobs, on_result)
     finally:

@@ -198,7 +198,10 @@ class ProcessRunner(ProcessPool[CollectJob, JobResult]):
     worker_noun = "collect worker"
     job_noun = "job"
 
-    def __init__(self, config: CollectConfig, workers: int, start_timeout_s: float = 600.0) -> None:
+    def __init__(
+        self, config: CollectConfig, simulator: str, workers: int, start_timeout_s: float = 600.0
+    ) -> None:
+        """``simulator``: the suite's (its workers' interpreter follows from it)."""
         super().__init__(
             RecorderExecutor,
             config,
@@ -207,4 +210,4 @@ class ProcessRunner(ProcessPool[CollectJob, JobResult]):
             job_timeout_s=partial(job_timeout_s, config),
             start_timeout_s=start_timeout_s,
         )
-        self.python = worker_python(load_suite(config.suite, config.suites_dir).simulator)
+        self.python = worker_python(simulator)

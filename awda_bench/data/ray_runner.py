@@ -14,13 +14,15 @@ from awda_bench.data.plan import CollectJob
 from awda_bench.data.pool import JobResult, RecorderExecutor, lost_job_result
 from awda_bench.execution.ray_pool import RayActorPool
 from awda_bench.runtimes import worker_python
-from awda_bench.suites import load_suite
 
 
 class RayJobRunner(RayActorPool[CollectJob, JobResult]):
     """Record jobs on ``workers`` Ray actors (a private local instance, or ``address``)."""
 
-    def __init__(self, config: CollectConfig, workers: int, *, address: str | None = None) -> None:
+    def __init__(
+        self, config: CollectConfig, simulator: str, workers: int, *, address: str | None = None
+    ) -> None:
+        """``simulator``: the suite's (its workers' interpreter follows from it)."""
         super().__init__(
             RecorderExecutor,
             config,
@@ -28,5 +30,5 @@ class RayJobRunner(RayActorPool[CollectJob, JobResult]):
             lost=lost_job_result,
             job_timeout_s=lambda _job: config.episode_timeout_s,
             address=address,
-            python=worker_python(load_suite(config.suite, config.suites_dir).simulator),
+            python=worker_python(simulator),
         )

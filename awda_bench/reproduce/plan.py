@@ -210,11 +210,8 @@ def _has_snapshots(ckpt: Path) -> bool:
     return bool(list_snapshots(ckpt))
 
 
-def _eval_tasks(suite_name: str, hold_out: str | None) -> tuple[list[int], int]:
+def _eval_tasks(suite: Suite, hold_out: str | None) -> tuple[list[int], int]:
     """``run --task`` restriction and the number of evaluation units (tasks or families)."""
-    from awda_bench.suites import load_suite
-
-    suite = load_suite(suite_name)
     tasks = list(suite.eval_tasks)
     if hold_out is not None:
         families = sorted({t.family for t in suite.tasks})
@@ -222,7 +219,7 @@ def _eval_tasks(suite_name: str, hold_out: str | None) -> tuple[list[int], int]:
             raise UnknownChoiceError("--hold-out family", hold_out, families)
         tasks = [t for t in tasks if t.family == hold_out]
         if not tasks:
-            raise UsageError(f"--hold-out {hold_out}: suite {suite_name!r} evaluates no such task")
+            raise UsageError(f"--hold-out {hold_out}: suite {suite.name!r} evaluates no such task")
         return [t.index for t in tasks], 1
     units = len({t.family for t in tasks}) if suite.episode_unit == "family" else len(tasks)
     return [], units
@@ -329,7 +326,7 @@ def _collect_stages(config: ReproduceConfig, suite: Suite) -> tuple[list[Stage],
         val = ["--val-data", str(test)]
     target = train_target(config.recipe, config.steps)
     recipe = load_recipe(config.recipe)
-    tasks, units = _eval_tasks(config.suite, config.hold_out)
+    tasks, units = _eval_tasks(suite, config.hold_out)
     plan = _Plan(
         config=config, suite=suite, recipe=recipe, data=data, val=val, synthesize=synthesize,
         n_train=n_train, target=target, tasks=tasks, units=units,
