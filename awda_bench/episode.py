@@ -41,7 +41,7 @@ from awda_bench.errors import PrivilegedAccessError
 
 GRIP_OUTCOMES: tuple[str, ...] = ("target", "other", "nothing")
 """What the gripper was first commanded closed on, where a task can tell (``object_distances``
-of :class:`~awda_bench.envs.task_base.AWDATaskEnv`): the object nearest the TCP within
+of :class:`~awda_bench.envs.task_base.AwdaTaskEnv`): the object nearest the TCP within
 ``reach_threshold_m`` was the target, or another object, or no object was that near. An episode
 record's ``first_grip`` is one of these or :data:`NEVER_GRIPPED` (``None`` where the task does not
 tell): the supplementary's §S3 asks whether a policy fails by going for the wrong object."""

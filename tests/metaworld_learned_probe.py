@@ -30,12 +30,12 @@ class LearnedProbe:
     load_snapshot = staticmethod(snapshots.load_snapshot)
 
     def __init__(self, snapshot: str | Path) -> None:
-        from awda_bench.policies.awda_policy import AWDAPolicy
+        from awda_bench.policies.awda_policy import AwdaPolicy
         from awda_bench.policies.tosvi_policy import TosviPolicy
 
         arch = snapshots.load_snapshot(Path(snapshot)).arch
         self.inner: Any = (
-            AWDAPolicy(snapshot) if arch == "awda" else TosviPolicy(snapshot, arch="tosvi")
+            AwdaPolicy(snapshot) if arch == "awda" else TosviPolicy(snapshot, arch="tosvi")
         )
         self.actions: list[np.ndarray] = []
 

@@ -63,7 +63,7 @@ def test_a_tosvi_snapshot_is_refused_in_one_line(tmp_path: Path) -> None:
     from awda_bench.errors import CorruptFileError
     from awda_bench.models.config import TosviConfig
     from awda_bench.models.snapshot import save_snapshot
-    from awda_bench.policies.awda_policy import AWDAPolicy
+    from awda_bench.policies.awda_policy import AwdaPolicy
 
     trunk = TrunkConfig(
         image_height_px=64, image_width_px=80, demo_frames=2, backbone_weights="none"
@@ -72,4 +72,4 @@ def test_a_tosvi_snapshot_is_refused_in_one_line(tmp_path: Path) -> None:
     path = tmp_path / "snapshot-000000001.pt"
     save_snapshot(path, model, step=1)
     with pytest.raises(CorruptFileError, match="not 'awda'"):
-        AWDAPolicy(path)
+        AwdaPolicy(path)

@@ -350,9 +350,9 @@ def test_frozen_recipe_trains_from_the_cache_and_resumes_the_identical_curve(
         model.config.trunk.backbone == "efficientnet-lite0" and model.config.trunk.freeze_backbone
     )
     from awda_bench.models.predict import predict_waypoints
-    from awda_bench.policies.awda_policy import AWDAPolicy
+    from awda_bench.policies.awda_policy import AwdaPolicy
 
-    policy = AWDAPolicy(list_snapshots(part)[-1])  # evaluation encodes live frames itself
+    policy = AwdaPolicy(list_snapshots(part)[-1])  # evaluation encodes live frames itself
     data = CollectedData(data_dir)
     agent, demo = data.select("agent")[0], data.select("demonstrator")[0]
     frames = data.frames(demo, np.linspace(0, demo.steps, 10).round().astype(int))

@@ -57,8 +57,8 @@ def _run(env, policy, task: int, seed: int, horizon: int = 200):
 @pytest.mark.slow
 def test_gt_waypoints_plans_restores_the_start_and_succeeds(pick_place_env) -> None:
     from awda_bench.policies.gt_waypoints import (
-        GTWaypointsConfig,
-        GTWaypointsPolicy,
+        GtWaypointsConfig,
+        GtWaypointsPolicy,
         episode_spec_for,
     )
 
@@ -67,7 +67,7 @@ def test_gt_waypoints_plans_restores_the_start_and_succeeds(pick_place_env) -> N
     env.reset(seed=123, options={"task": 14})
     qpos0 = base.agent.robot.get_qpos().clone()
     objects0, _ = base.object_poses()
-    policy = GTWaypointsPolicy(GTWaypointsConfig(record_truth=True))
+    policy = GtWaypointsPolicy(GtWaypointsConfig(record_truth=True))
     policy.reset(EpisodeContext(env=base, spec=episode_spec_for("pick_place", 14, 123)))
     # planning ran the expert on this very scene and put everything back
     assert float((base.agent.robot.get_qpos() - qpos0).abs().max()) < 1e-6
@@ -97,7 +97,7 @@ def test_gt_waypoints_plans_restores_the_start_and_succeeds(pick_place_env) -> N
     assert policy.stats.overhead_per_step_ms < 5.0  # generous bound for shared CI machines
     # evaluating (the default) plans without the contact-force truth: only the miner is used
     env.reset(seed=124, options={"task": 14})
-    plain = GTWaypointsPolicy()
+    plain = GtWaypointsPolicy()
     plain.reset(EpisodeContext(env=base, spec=episode_spec_for("pick_place", 14, 124)))
     assert plain.stats.trajectories[0].truth == {} and plain.waypoints is not None
 
@@ -139,8 +139,8 @@ def test_physics_only_planning_gives_the_same_rollout_as_full_env_steps() -> Non
     gym = pytest.importorskip("gymnasium")
     import awda_bench.envs  # noqa: F401
     from awda_bench.policies.gt_waypoints import (
-        GTWaypointsConfig,
-        GTWaypointsPolicy,
+        GtWaypointsConfig,
+        GtWaypointsPolicy,
         episode_spec_for,
     )
 
@@ -150,7 +150,7 @@ def test_physics_only_planning_gives_the_same_rollout_as_full_env_steps() -> Non
         # episodes (other tests) can change later rollouts by a fraction of a millimetre.
         env = gym.make("AWDA-PickPlace-v1", obs_mode="state", num_envs=1, reward_mode="none")
         env.reset(seed=7, options={"task": 15})
-        policy = GTWaypointsPolicy(GTWaypointsConfig(physics_only_planning=physics_only))
+        policy = GtWaypointsPolicy(GtWaypointsConfig(physics_only_planning=physics_only))
         (traj,) = policy.plan(
             EpisodeContext(env=env.unwrapped, spec=episode_spec_for("pick_place", 15, 7))
         )

@@ -36,7 +36,7 @@ from awda_bench.metaworld.sawyer_interface import SawyerInterface
 from awda_bench.models.architectures import build_model
 from awda_bench.models.config import AwdaConfig, TosviConfig, TrunkConfig
 from awda_bench.models.snapshot import save_snapshot
-from awda_bench.policies.awda_policy import AWDAPolicy, awda
+from awda_bench.policies.awda_policy import AwdaPolicy, awda
 from awda_bench.primitives.config import ExecutorConfig
 from awda_bench.primitives.executor import WaypointExecutor
 from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION
@@ -156,7 +156,7 @@ def test_awda_drives_the_sawyer_on_meta_world_and_the_panda_elsewhere(
 ) -> None:
     snapshot = _awda(tmp_path / "snapshot-000000001.pt", trunk=_trunk())
     for view in (_SawyerView(), _PandaView()):
-        policy = awda(snapshot, "centre") if centre else AWDAPolicy(snapshot)
+        policy = awda(snapshot, "centre") if centre else AwdaPolicy(snapshot)
         policy.reset(_context(view))
         waypoints = policy.waypoints
         assert waypoints is not None and waypoints.shape == (5, 4)
@@ -191,13 +191,13 @@ def test_a_snapshot_for_another_camera_is_refused_in_one_line(tmp_path: Path) ->
     foreign = _awda(
         tmp_path / "a" / "snapshot-000000001.pt", trunk=head, **_camera(PANDA_K, (240, 320))
     )
-    policy = AWDAPolicy(foreign)
+    policy = AwdaPolicy(foreign)
     with pytest.raises(UsageError, match="camera") as err:
         policy.reset(_context(_SawyerView()))
     assert "\n" not in str(err.value)
     # trained with Meta-World's 224 x 224 camera: its rays fit, it predicts (64 x 64 net input)
     own = _awda(tmp_path / "b" / "snapshot-000000001.pt", trunk=head, **_camera(MW_K, (SIZE, SIZE)))
-    policy = AWDAPolicy(own)
+    policy = AwdaPolicy(own)
     policy.reset(_context(_SawyerView()))
     assert policy.waypoints is not None and np.isfinite(policy.waypoints).all()
 

@@ -92,16 +92,16 @@ def test_a_declaration_that_disagrees_with_the_registration_is_refused() -> None
 
 
 def test_the_builtin_methods_declare_what_they_are() -> None:
-    from awda_bench.policies.gt_waypoints import GTWaypointsPolicy
+    from awda_bench.policies.gt_waypoints import GtWaypointsPolicy
     from awda_bench.policies.random_policy import RandomPolicy
     from awda_bench.policies.scripted import ScriptedPolicy
     from awda_bench.policies.tosvi_policy import TosviPolicy
 
-    assert is_privileged(GTWaypointsPolicy) and is_privileged(ScriptedPolicy)
+    assert is_privileged(GtWaypointsPolicy) and is_privileged(ScriptedPolicy)
     assert not is_privileged(RandomPolicy) and not is_privileged(TosviPolicy)
-    from awda_bench.policies.awda_policy import AWDAPolicy
+    from awda_bench.policies.awda_policy import AwdaPolicy
 
-    assert not is_privileged(AWDAPolicy)
+    assert not is_privileged(AwdaPolicy)
 
 
 def test_a_context_without_the_env_says_so_in_one_line() -> None:

@@ -317,7 +317,7 @@ def test_grasp_select_centre_folds_into_the_centre_methods(tmp_path: Path, capsy
 
     from awda_bench.commands.run import add_parser, config_from_args
     from awda_bench.evaluation.methods import SnapshotRef, get_method, make_policy
-    from awda_bench.policies.gt_waypoints import GTWaypointsPolicy
+    from awda_bench.policies.gt_waypoints import GtWaypointsPolicy
 
     parser = argparse.ArgumentParser()
     add_parser(parser.add_subparsers())
@@ -328,7 +328,7 @@ def test_grasp_select_centre_folds_into_the_centre_methods(tmp_path: Path, capsy
 
     # waypoint-guided selection is the default: the plain names
     assert method() == method("--grasp-select", "waypoint") == "gt-waypoints"
-    assert GTWaypointsPolicy().config.localization.select == "waypoint"
+    assert GtWaypointsPolicy().config.localization.select == "waypoint"
     assert method("--num-waypoints", "3", "--grasp-select", "waypoint") == "gt-waypoints-k3"
     # the reference's centre rule is a method of its own
     assert method("--grasp-select", "centre") == "gt-waypoints-centre"

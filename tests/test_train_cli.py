@@ -252,9 +252,9 @@ def test_every_column_trains_20_steps_into_loadable_snapshots(
     assert any((out / "tensorboard").iterdir())
     if column.arch == "awda":
         from awda_bench.models.predict import predict_waypoints
-        from awda_bench.policies.awda_policy import AWDAPolicy
+        from awda_bench.policies.awda_policy import AwdaPolicy
 
-        policy = AWDAPolicy(snapshots[-1])  # what the `awda` evaluation method loads
+        policy = AwdaPolicy(snapshots[-1])  # what the `awda` evaluation method loads
         assert policy.model.config.num_heads == column.num_heads
         agent = data.select("agent")[0]
         demo = data.select("demonstrator")[0]

@@ -57,9 +57,9 @@ def _make_env(suite: Any) -> Any:
 
 def measure_episodes(suite: Any, env: Any, episodes: int, seed: int) -> dict[str, float]:
     from awda_bench.episode import EpisodeContext
-    from awda_bench.policies.gt_waypoints import GTWaypointsPolicy, episode_spec_for
+    from awda_bench.policies.gt_waypoints import GtWaypointsPolicy, episode_spec_for
 
-    policy = GTWaypointsPolicy()
+    policy = GtWaypointsPolicy()
     base = env.unwrapped
     rows = []
     overheads: list[float] = []

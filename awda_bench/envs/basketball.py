@@ -21,7 +21,7 @@ from awda_bench.envs.static_props import (
     build_hoop,
     material,
 )
-from awda_bench.envs.task_base import AWDATaskEnv
+from awda_bench.envs.task_base import AwdaTaskEnv
 
 
 @dataclass(frozen=True)
@@ -104,7 +104,7 @@ class BasketballLayout:
 
 
 @register_env("AWDA-Basketball-v1", max_episode_steps=200)
-class BasketballEnv(AWDATaskEnv):
+class BasketballEnv(AwdaTaskEnv):
     """
     **Task Description:**
     Pick up the target ball and drop it through the target hoop. Three balls (red, yellow, blue)

@@ -18,11 +18,11 @@ from mani_skill.utils.structs.articulation import Articulation
 from mani_skill.utils.structs.link import Link
 
 from awda_bench.envs.articulated import hand_holds
-from awda_bench.envs.task_base import AWDATaskEnv
+from awda_bench.envs.task_base import AwdaTaskEnv
 from awda_bench.robot.controller import gripper_commanded_closed
 
 
-class CabinetTaskEnv(AWDATaskEnv):
+class CabinetTaskEnv(AwdaTaskEnv):
     """Base of the door and drawer tasks (see the module docstring)."""
 
     has_grasp_target: ClassVar[bool] = False

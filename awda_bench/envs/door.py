@@ -19,7 +19,7 @@ from awda_bench.envs.articulated import (
     yaw_quat,
 )
 from awda_bench.envs.cabinet_task import CabinetTaskEnv
-from awda_bench.envs.task_base import AWDATaskEnv
+from awda_bench.envs.task_base import AwdaTaskEnv
 
 NUM_DOOR_VARIATIONS = 4
 """``variation = 2 * door + action``; action 0 = open, 1 = close."""
@@ -103,7 +103,7 @@ class DoorEnv(CabinetTaskEnv):
     openings_key: ClassVar[str] = "door_angles"
     opening_key: ClassVar[str] = "door_angle_rad"
 
-    _TASK_STATE: ClassVar[tuple[str, ...]] = (*AWDATaskEnv._TASK_STATE,)
+    _TASK_STATE: ClassVar[tuple[str, ...]] = (*AwdaTaskEnv._TASK_STATE,)
 
     def __init__(self, *args: Any, layout: DoorLayout | None = None, **kwargs: Any) -> None:
         self.layout = layout or DoorLayout()

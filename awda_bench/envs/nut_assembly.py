@@ -22,7 +22,7 @@ from awda_bench.envs.static_props import (
     add_square_ring,
     build_peg,
 )
-from awda_bench.envs.task_base import AWDATaskEnv
+from awda_bench.envs.task_base import AwdaTaskEnv
 
 
 def rotate(quat: torch.Tensor, vec: torch.Tensor, *, inverse: bool = False) -> torch.Tensor:
@@ -140,7 +140,7 @@ class NutAssemblyLayout:
 
 
 @register_env("AWDA-NutAssembly-v1", max_episode_steps=200)
-class NutAssemblyEnv(AWDATaskEnv):
+class NutAssemblyEnv(AwdaTaskEnv):
     """
     **Task Description:**
     Pick up the target nut by its handle and put it down over the target peg. Three square nuts

@@ -18,7 +18,7 @@ from awda_bench.envs.objects import (
     build_object,
     distance_to_objects,
 )
-from awda_bench.envs.task_base import AWDATaskEnv
+from awda_bench.envs.task_base import AwdaTaskEnv
 
 NUM_TASKS = 16
 """``task = 4 * object + compartment``."""
@@ -53,7 +53,7 @@ class PickPlaceLayout:
 
 
 @register_env("AWDA-PickPlace-v1", max_episode_steps=180)
-class PickPlaceEnv(AWDATaskEnv):
+class PickPlaceEnv(AwdaTaskEnv):
     """
     **Task Description:**
     Pick the target object out of the source bin and put it into one of the 4 compartments of the

@@ -28,7 +28,7 @@ from mani_skill.utils.structs.articulation import Articulation
 from mani_skill.utils.structs.link import Link
 from mani_skill.utils.structs.pose import Pose
 
-from awda_bench.envs.task_base import AWDATaskEnv
+from awda_bench.envs.task_base import AwdaTaskEnv
 
 _X_TO_Z = [float(np.sqrt(0.5)), 0.0, float(-np.sqrt(0.5)), 0.0]
 """Quaternion (wxyz) turning the x axis onto +z: SAPIEN prismatic joints slide along their frame's
@@ -207,7 +207,7 @@ def build_button_panel(
 
 
 @register_env("AWDA-PressButton-v1", max_episode_steps=200)
-class PressButtonEnv(AWDATaskEnv):
+class PressButtonEnv(AwdaTaskEnv):
     """
     **Task Description:**
     Press one of six buttons. Two button panels stand on the table: panel 0 (dark plate) with a row

@@ -21,7 +21,7 @@ from mani_skill.utils.structs.actor import Actor
 
 from awda_bench.envs.layouts import first_separated_layout, place_upright
 from awda_bench.envs.objects import ObjectSpec, build_object, distance_to_objects
-from awda_bench.envs.task_base import AWDATaskEnv
+from awda_bench.envs.task_base import AwdaTaskEnv
 
 STACK_ORDERS: tuple[tuple[int, int], ...] = tuple(permutations(range(3), 2))
 """``(A, B)`` per variation: the cube to pick (A) and the cube to put it on (B)."""
@@ -76,7 +76,7 @@ class StackBlockLayout:
 
 
 @register_env("AWDA-StackBlock-v1", max_episode_steps=200)
-class StackBlockEnv(AWDATaskEnv):
+class StackBlockEnv(AwdaTaskEnv):
     """
     **Task Description:**
     Three cubes (red, green, blue; 4.5 cm) lie on the table. Pick cube A and put it on cube B; the
@@ -94,7 +94,7 @@ class StackBlockEnv(AWDATaskEnv):
     - A's centre lies within B's footprint (in B's frame, ``|x|, |y| <= edge / 2``), A's bottom is
       within ``stack_gap_tolerance_m`` of B's top, A is not grasped (released), and A moves slower
       than ``max_resting_speed_m_s``
-    - grasp analysis (latched, see :class:`AWDATaskEnv`): ``reached`` = TCP within 4 cm of A's
+    - grasp analysis (latched, see :class:`AwdaTaskEnv`): ``reached`` = TCP within 4 cm of A's
       surface before the first grip command; ``grasped`` = reached, then A raised >= 5 cm
     """
 

@@ -1,4 +1,4 @@
-"""``AWDATaskEnv``: what every benchmark task shares, so task files hold only their task.
+"""``AwdaTaskEnv``: what every benchmark task shares, so task files hold only their task.
 
 A task subclass sets ``family`` and ``num_variations``, builds its objects in ``_load_task_scene``,
 places them in ``_initialize_task(env_idx, variation)``, and judges them in
@@ -37,7 +37,7 @@ from awda_bench.envs.exact_state import ExactStateEnv, env_rows
 from awda_bench.errors import UsageError
 
 
-class AWDATaskEnv(ExactStateEnv):
+class AwdaTaskEnv(ExactStateEnv):
     """Base of the benchmark's tasks (see the module docstring for the contract)."""
 
     SUPPORTED_ROBOTS = list(EMBODIMENTS)

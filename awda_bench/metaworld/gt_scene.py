@@ -1,4 +1,4 @@
-"""What ``gt-waypoints`` (:class:`awda_bench.policies.gt_waypoints.GTWaypointsPolicy`) needs of a
+"""What ``gt-waypoints`` (:class:`awda_bench.policies.gt_waypoints.GtWaypointsPolicy`) needs of a
 Meta-World episode: the expert's plan from the real start, the Sawyer's state, its wrist
 localizer, and its actions.
 
@@ -59,7 +59,7 @@ class MetaWorldScene:
         """The Sawyer as the primitives drive it (its mocap offset measured now, at rest)."""
 
     def configure(self, config: Any) -> Any:
-        """``config`` (a ``GTWaypointsConfig``) with the Sawyer's executor, mining and
+        """``config`` (a ``GtWaypointsConfig``) with the Sawyer's executor, mining and
         localization parameters (:mod:`awda_bench.metaworld.sawyer`) in place of the Panda's;
         the method's own choices (K, the planning budget, the grasp's component rule) kept.
 

@@ -14,7 +14,7 @@ the snapshot's configured input size. Predicted attribute probabilities are thre
 
 The robot the executor drives comes from the episode's observations
 (:func:`~awda_bench.primitives.robot_interface.robot_interface_of`): on the ManiSkill suites the
-``panda_awda`` agent with :class:`AWDAPolicyConfig`'s executor and localization parameters, its
+``panda_awda`` agent with :class:`AwdaPolicyConfig`'s executor and localization parameters, its
 actions the primitives' commands; on Meta-World the Sawyer
 (:class:`~awda_bench.metaworld.sawyer_interface.SawyerInterface`, the object ``gt-waypoints``
 executes with there): its executor and localization parameters replace the configured ones (the
@@ -50,7 +50,7 @@ from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION
 
 
 @dataclass(frozen=True)
-class AWDAPolicyConfig:
+class AwdaPolicyConfig:
     """Settings of the ``awda`` method around the network."""
 
     attribute_threshold: float = 0.5
@@ -65,7 +65,7 @@ class AWDAPolicyConfig:
     def __post_init__(self) -> None:
         if not 0.0 < self.attribute_threshold < 1.0:
             raise ValueError(
-                f"AWDAPolicyConfig.attribute_threshold must be in (0, 1), got {self.attribute_threshold}"
+                f"AwdaPolicyConfig.attribute_threshold must be in (0, 1), got {self.attribute_threshold}"
             )
 
 
@@ -94,17 +94,17 @@ def check_camera(config: AwdaConfig, camera: tuple[np.ndarray, np.ndarray]) -> i
     return index
 
 
-class AWDAPolicy:
+class AwdaPolicy:
     """Predicts waypoints once per episode from images, then executes them."""
 
     name = "awda"
 
-    def __init__(self, snapshot: str | Path, config: AWDAPolicyConfig | None = None) -> None:
+    def __init__(self, snapshot: str | Path, config: AwdaPolicyConfig | None = None) -> None:
         import torch
 
         from awda_bench.models.snapshot import load_snapshot
 
-        self.config = config or AWDAPolicyConfig()
+        self.config = config or AwdaPolicyConfig()
         loaded = load_snapshot(Path(snapshot))
         if loaded.arch != "awda":
             raise CorruptFileError(
@@ -162,7 +162,7 @@ class AWDAPolicy:
 
     def act(self, obs: Any) -> np.ndarray:
         if self._executor is None or self._robot is None:
-            raise RuntimeError("AWDAPolicy.act() before reset(ctx)")
+            raise RuntimeError("AwdaPolicy.act() before reset(ctx)")
         state = self._robot.robot_states()[0]
         command = self._executor.step(state)[None]
         return np.asarray(self._robot.env_actions(command), dtype=np.float32)
@@ -177,7 +177,7 @@ class AWDAPolicy:
         return self._waypoints
 
 
-def awda(snapshot: str | Path, grasp_select: str = GRASP_SELECTS[0]) -> AWDAPolicy:
+def awda(snapshot: str | Path, grasp_select: str = GRASP_SELECTS[0]) -> AwdaPolicy:
     """The awda family (one method per setting, :mod:`awda_bench.evaluation.methods`): grasps
     take the wrist depth component the predicted grasp waypoint points at (``waypoint``, ``awda``)
     or the one nearest the wrist image's centre (``centre``, the reference's rule:
@@ -185,8 +185,8 @@ def awda(snapshot: str | Path, grasp_select: str = GRASP_SELECTS[0]) -> AWDAPoli
     if grasp_select not in GRASP_SELECTS:
         raise UnknownChoiceError("--grasp-select", grasp_select, GRASP_SELECTS)
     if grasp_select == GRASP_SELECTS[0]:
-        return AWDAPolicy(snapshot)
+        return AwdaPolicy(snapshot)
     localization = replace(WRIST_LOCALIZATION, select=grasp_select)
-    policy = AWDAPolicy(snapshot, AWDAPolicyConfig(localization=localization))
+    policy = AwdaPolicy(snapshot, AwdaPolicyConfig(localization=localization))
     policy.name = "awda" + CENTRE_SUFFIX
     return policy

@@ -11,7 +11,7 @@ Per episode::
     act(obs):    WaypointExecutor(W).step(state) per env          grasp uses wrist depth only
 
 Rendered frames per episode: wrist depth images during grasps only (one per HOVER step of the
-grasp primitive), counted in :attr:`GTWaypointsPolicy.stats`.
+grasp primitive), counted in :attr:`GtWaypointsPolicy.stats`.
 
 What is the simulator's is one small *scene* object per episode: :class:`ManiSkillScene` here,
 :class:`awda_bench.metaworld.gt_scene.MetaWorldScene` on Meta-World (the package's scripted
@@ -44,7 +44,7 @@ from awda_bench.waypoints import extract_waypoints
 
 
 @dataclass(frozen=True)
-class GTWaypointsConfig:
+class GtWaypointsConfig:
     """Settings of the ``gt-waypoints`` method."""
 
     num_waypoints: int = 5
@@ -143,14 +143,14 @@ def record_rollouts(
 
 @dataclass
 class EpisodeStats:
-    """What one episode of ``gt-waypoints`` cost (reset by :meth:`GTWaypointsPolicy.reset`)."""
+    """What one episode of ``gt-waypoints`` cost (reset by :meth:`GtWaypointsPolicy.reset`)."""
 
     planning_s: float = 0.0
     """Wall time of the expert rollout + state save/restore [s] (simulation)."""
     planning_steps: int = 0
     act_calls: int = 0
     act_s: float = 0.0
-    """Wall time inside :meth:`GTWaypointsPolicy.act` [s], rendering and localization included."""
+    """Wall time inside :meth:`GtWaypointsPolicy.act` [s], rendering and localization included."""
     frames: int = 0
     """Wrist depth frames rendered."""
     capture_s: float = 0.0
@@ -158,7 +158,7 @@ class EpisodeStats:
     localize_s: float = 0.0
     """Of ``act_s``: localization on the frames [s]."""
     step_overhead_ms: list[float] = field(default_factory=list)
-    """Per :meth:`~GTWaypointsPolicy.act` call: its wall time minus rendering [ms]."""
+    """Per :meth:`~GtWaypointsPolicy.act` call: its wall time minus rendering [ms]."""
     trajectories: list[Trajectory] = field(default_factory=list)
 
     @property
@@ -172,7 +172,7 @@ class EpisodeStats:
 class Scene(Protocol):
     """What ``gt-waypoints`` asks of the simulator in one episode."""
 
-    def configure(self, config: GTWaypointsConfig) -> GTWaypointsConfig:
+    def configure(self, config: GtWaypointsConfig) -> GtWaypointsConfig:
         """The settings the episode runs with (the robot's own parameters put in)."""
 
     def plan(self, max_steps: int) -> list[Trajectory]:
@@ -199,7 +199,7 @@ class ManiSkillScene:
         self._physics_only = True
         self._record_truth = False
 
-    def configure(self, config: GTWaypointsConfig) -> GTWaypointsConfig:
+    def configure(self, config: GtWaypointsConfig) -> GtWaypointsConfig:
         self._physics_only = config.physics_only_planning
         self._record_truth = config.record_truth
         return config
@@ -245,15 +245,15 @@ def scene_for(ctx: EpisodeContext) -> Scene:
     return ManiSkillScene(ctx)
 
 
-class GTWaypointsPolicy:
+class GtWaypointsPolicy:
     """Plans with the suite's scripted expert on the scene itself, then executes K waypoints."""
 
     name = "gt-waypoints"
     privileged = True
     """It plans on the simulator (``ctx.env``): its rows are marked privileged."""
 
-    def __init__(self, config: GTWaypointsConfig | None = None) -> None:
-        self.config = config or GTWaypointsConfig()
+    def __init__(self, config: GtWaypointsConfig | None = None) -> None:
+        self.config = config or GtWaypointsConfig()
         """The method's settings (the Panda's parameters; on Meta-World the episode runs with
         :attr:`episode_config`, the Sawyer's in their place)."""
         self.episode_config = self.config
@@ -304,7 +304,7 @@ class GTWaypointsPolicy:
     # ------------------------------------------------------------------ acting
     def act(self, obs: Any) -> np.ndarray:
         if self._env is None or self._scene is None:
-            raise RuntimeError("GTWaypointsPolicy.act() before reset(ctx)")
+            raise RuntimeError("GtWaypointsPolicy.act() before reset(ctx)")
         t0 = time.perf_counter()
         states = self._scene.robot_states()
         commands = np.stack([ex.step(s) for ex, s in zip(self._executors, states, strict=True)])
@@ -348,17 +348,17 @@ def gt_waypoints_method_name(num_waypoints: int) -> str:
     return "gt-waypoints" if num_waypoints == 5 else f"gt-waypoints-k{num_waypoints}"
 
 
-def gt_waypoints(num_waypoints: int = 5, grasp_select: str = GRASP_SELECTS[0]) -> GTWaypointsPolicy:
+def gt_waypoints(num_waypoints: int = 5, grasp_select: str = GRASP_SELECTS[0]) -> GtWaypointsPolicy:
     """The gt-waypoints family (one method per setting, :mod:`awda_bench.evaluation.methods`): K
     waypoints (``gt-waypoints-k3``, ``-k8``; the paper's 5 by default), and grasps that take the
     wrist depth component the grasp waypoint points at (``waypoint``) or the one nearest the
     wrist image's centre (``centre``, the reference's rule: ``gt-waypoints-centre``)."""
     if grasp_select not in GRASP_SELECTS:
         raise UnknownChoiceError("--grasp-select", grasp_select, GRASP_SELECTS)
-    config = GTWaypointsConfig(num_waypoints=num_waypoints)
+    config = GtWaypointsConfig(num_waypoints=num_waypoints)
     if grasp_select != GRASP_SELECTS[0]:
         config = replace(config, localization=replace(WRIST_LOCALIZATION, select=grasp_select))
-    policy = GTWaypointsPolicy(config)
+    policy = GtWaypointsPolicy(config)
     policy.name = gt_waypoints_method_name(num_waypoints) + (
         CENTRE_SUFFIX if grasp_select == "centre" else ""
     )

@@ -55,7 +55,7 @@ def wrist_camera_pose(
 
 
 @register_agent()
-class PandaAWDA(Panda):
+class PandaAwda(Panda):
     """Franka Panda, eye-in-hand depth camera, 4-D mink-IK action space."""
 
     uid = "panda_awda"
