@@ -267,102 +267,70 @@ def select_snapshots(spec: MethodSpec, checkpoints: Path | None, last_n: int) ->
 _GT_WAYPOINTS = "awda_bench.policies.gt_waypoints:gt_waypoints"
 _AWDA = "awda_bench.policies.awda_policy:awda"
 _TOSVI = "awda_bench.policies.tosvi_policy:TosviPolicy"
-_CENTRE_RULE = "(the reference's rule; --grasp-select centre)"
+_CENTRE_RULE = (
+    "grasps take the depth component nearest the image centre (the reference's rule; "
+    "--grasp-select centre)"
+)
+_ACTION_RULES = {
+    "mean": "the mixture mean as the action (--action-select mean)",
+    "mode": "the heaviest component's mean (--action-select mode)",
+}
+_TOSVI_ARCHS = {
+    "tosvi": "learned: T-OSVI closed-loop snapshots (--checkpoints DIR; also the no-waypoints "
+    "ablation), actions sampled from the mixture",
+    "tosvi-depth": "learned: T-OSVI +depth snapshots (wrist depth, late fusion), sampled actions",
+}
 
-for _spec in (
-    MethodSpec(
-        "gt-waypoints",
-        _GT_WAYPOINTS,
-        privileged=True,
-        description="privileged: ground-truth attributed waypoints executed by the primitives",
-    ),
-    MethodSpec(
-        "gt-waypoints-k3",
-        _GT_WAYPOINTS,
-        privileged=True,
-        description="gt-waypoints with K = 3 waypoints (--num-waypoints 3)",
-        options=(("num_waypoints", 3),),
-    ),
-    MethodSpec(
-        "gt-waypoints-k8",
-        _GT_WAYPOINTS,
-        privileged=True,
-        description="gt-waypoints with K = 8 waypoints (--num-waypoints 8)",
-        options=(("num_waypoints", 8),),
-    ),
-    MethodSpec(
-        "scripted",
-        "awda_bench.policies.scripted:ScriptedPolicy",
-        privileged=True,
-        description="privileged: scripted expert",
-    ),
-    MethodSpec(
-        "awda",
-        _AWDA,
-        learned=True,
-        description="learned: AWDA waypoint network snapshots (--checkpoints DIR) + motor primitives",
-    ),
-    MethodSpec(
-        "gt-waypoints-centre",
-        _GT_WAYPOINTS,
-        privileged=True,
-        description=f"gt-waypoints, grasps take the depth component nearest the image centre {_CENTRE_RULE}",
-        options=(("grasp_select", "centre"),),
-    ),
-    MethodSpec(
-        "awda-centre",
-        _AWDA,
-        learned=True,
-        description=f"awda, grasps take the depth component nearest the image centre {_CENTRE_RULE}",
-        options=(("grasp_select", "centre"),),
-    ),
-    MethodSpec(
-        "tosvi",
-        _TOSVI,
-        learned=True,
-        description="learned: T-OSVI closed-loop snapshots (--checkpoints DIR; also the "
-        "no-waypoints ablation), actions sampled from the mixture",
-        options=(("action_select", "sample"), ("arch", "tosvi")),
-    ),
-    MethodSpec(
-        "tosvi-mean",
-        _TOSVI,
-        learned=True,
-        description="tosvi with the mixture mean as the action (--action-select mean)",
-        options=(("action_select", "mean"), ("arch", "tosvi")),
-    ),
-    MethodSpec(
-        "tosvi-mode",
-        _TOSVI,
-        learned=True,
-        description="tosvi with the heaviest component's mean (--action-select mode)",
-        options=(("action_select", "mode"), ("arch", "tosvi")),
-    ),
-    MethodSpec(
-        "tosvi-depth",
-        _TOSVI,
-        learned=True,
-        description="learned: T-OSVI +depth snapshots (wrist depth, late fusion), sampled actions",
-        options=(("action_select", "sample"), ("arch", "tosvi-depth")),
-    ),
-    MethodSpec(
-        "tosvi-depth-mean",
-        _TOSVI,
-        learned=True,
-        description="tosvi-depth with the mixture mean (--action-select mean)",
-        options=(("action_select", "mean"), ("arch", "tosvi-depth")),
-    ),
-    MethodSpec(
-        "tosvi-depth-mode",
-        _TOSVI,
-        learned=True,
-        description="tosvi-depth with the heaviest component's mean (--action-select mode)",
-        options=(("action_select", "mode"), ("arch", "tosvi-depth")),
-    ),
-    MethodSpec(
-        "random",
-        "awda_bench.policies.random_policy:RandomPolicy",
-        description="uniform random actions (a floor for every table)",
-    ),
-):
-    register_method(_spec)
+
+def _builtin(
+    name: str,
+    target: str,
+    description: str,
+    *,
+    learned: bool = False,
+    privileged: bool = False,
+    **options: Any,
+) -> None:
+    """Register a built-in method: ``options`` are its family factory's keyword arguments."""
+    register_method(
+        MethodSpec(
+            name, target, learned=learned, privileged=privileged, description=description,
+            options=tuple(options.items()),
+        )
+    )  # fmt: skip
+
+
+_builtin(
+    "gt-waypoints", _GT_WAYPOINTS,
+    "privileged: ground-truth attributed waypoints executed by the primitives", privileged=True,
+)  # fmt: skip
+for _k in (3, 8):
+    _builtin(
+        f"gt-waypoints-k{_k}", _GT_WAYPOINTS,
+        f"gt-waypoints with K = {_k} waypoints (--num-waypoints {_k})", privileged=True,
+        num_waypoints=_k,
+    )  # fmt: skip
+_builtin(
+    "scripted", "awda_bench.policies.scripted:ScriptedPolicy", "privileged: scripted expert",
+    privileged=True,
+)  # fmt: skip
+_builtin(
+    "awda", _AWDA,
+    "learned: AWDA waypoint network snapshots (--checkpoints DIR) + motor primitives", learned=True,
+)  # fmt: skip
+_builtin(
+    "gt-waypoints-centre", _GT_WAYPOINTS, f"gt-waypoints, {_CENTRE_RULE}", privileged=True,
+    grasp_select="centre",
+)  # fmt: skip
+_builtin("awda-centre", _AWDA, f"awda, {_CENTRE_RULE}", learned=True, grasp_select="centre")
+for _arch, _description in _TOSVI_ARCHS.items():
+    _builtin(_arch, _TOSVI, _description, learned=True, action_select="sample", arch=_arch)
+    for _select, _rule in _ACTION_RULES.items():
+        _builtin(
+            f"{_arch}-{_select}", _TOSVI, f"{_arch} with {_rule}", learned=True,
+            action_select=_select, arch=_arch,
+        )  # fmt: skip
+_builtin(
+    "random", "awda_bench.policies.random_policy:RandomPolicy",
+    "uniform random actions (a floor for every table)",
+)  # fmt: skip
