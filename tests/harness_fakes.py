@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -20,6 +21,7 @@ import numpy as np
 
 from awda_bench.episode import EpisodeContext
 from awda_bench.errors import CorruptFileError
+from awda_bench.evaluation.methods import MethodSpec
 
 FAKE_SUITE_TOML = """
 name = "fake"
@@ -56,6 +58,26 @@ def write_fake_suite(directory: Path, name: str = "fake", **overrides: str) -> P
     path = directory / f"{name}.toml"
     path.write_text(text)
     return path
+
+
+def fake_suites_dir(directory: Path) -> Path:
+    """``directory`` (created if missing) holding the fake suite, for ``--tasks-dir`` /
+    ``suites_dir``."""
+    directory.mkdir(parents=True, exist_ok=True)
+    write_fake_suite(directory)
+    return directory
+
+
+def fake_sweep_config(suites: Path, out: Path, method: str = "fake", **overrides: Any) -> Any:
+    """A :class:`~awda_bench.evaluation.sweep.SweepConfig` of the fake suite (another suite of
+    ``suites`` with ``suite=``) into ``out``: inline (``workers=0``), no progress bars, unless
+    ``overrides`` say otherwise."""
+    from awda_bench.evaluation.sweep import SweepConfig
+
+    fields: dict[str, Any] = {"suite": "fake", "workers": 0, **overrides}
+    return SweepConfig(
+        out=out, suites_dir=suites, method=method, progress=False, command="test", **fields
+    )
 
 
 class FakeEnv(gym.Env):
@@ -175,29 +197,41 @@ class PrivilegedEnvReadingPolicy(SkillPolicy):
         self.env_name = type(ctx.env).__name__
 
 
-class HangingPolicy(SkillPolicy):
-    """Hangs (like a stuck renderer) on episode 1 unless AWDA_FAKE_NO_HANG is set."""
+class _FaultOnEpisodeOne(SkillPolicy):
+    """Misbehaves (:meth:`fault`) on episode 1 unless the environment variable ``disarm_env`` is
+    set."""
 
-    name = "hanging"
+    disarm_env = ""
+
+    def fault(self) -> None:
+        raise NotImplementedError
 
     def act(self, obs: Any) -> np.ndarray:
         assert self.spec is not None
-        if self.spec.episode == 1 and not os.environ.get("AWDA_FAKE_NO_HANG"):
-            time.sleep(3600)
+        if self.spec.episode == 1 and not os.environ.get(self.disarm_env):
+            self.fault()
         return super().act(obs)
 
 
-class CrashingPolicy(SkillPolicy):
+class HangingPolicy(_FaultOnEpisodeOne):
+    """Hangs (like a stuck renderer) on episode 1 unless AWDA_FAKE_NO_HANG is set."""
+
+    name = "hanging"
+    disarm_env = "AWDA_FAKE_NO_HANG"
+
+    def fault(self) -> None:
+        time.sleep(3600)
+
+
+class CrashingPolicy(_FaultOnEpisodeOne):
     """Kills its own process on episode 1 (a segfaulting simulator) unless AWDA_FAKE_NO_CRASH
     is set."""
 
     name = "crashing"
+    disarm_env = "AWDA_FAKE_NO_CRASH"
 
-    def act(self, obs: Any) -> np.ndarray:
-        assert self.spec is not None
-        if self.spec.episode == 1 and not os.environ.get("AWDA_FAKE_NO_CRASH"):
-            os._exit(7)
-        return super().act(obs)
+    def fault(self) -> None:
+        os._exit(7)
 
 
 class SlowPolicy(SkillPolicy):
@@ -208,6 +242,73 @@ class SlowPolicy(SkillPolicy):
     def act(self, obs: Any) -> np.ndarray:
         time.sleep(float(os.environ.get("AWDA_FAKE_SLEEP_S", "0.05")))
         return super().act(obs)
+
+
+def learned_method(name: str = "learned") -> MethodSpec:
+    """A learned method: :class:`SkillPolicy` on snapshots written by :func:`write_snapshots`
+    (register it with ``awda_bench.evaluation.methods.register_method``)."""
+    return MethodSpec(
+        name,
+        "harness_fakes:SkillPolicy",
+        learned=True,
+        list_snapshots="harness_fakes:list_snapshots",
+        load_snapshot="harness_fakes:load_snapshot",
+    )
+
+
+def fake_suite_argv(suites: Path, out: Path, *extra: str) -> list[str]:
+    """``awda run`` of the fake suite in ``suites`` into ``out``, no progress bars, then
+    ``extra``."""
+    return [
+        "run",
+        "--suite",
+        "fake",
+        "--tasks-dir",
+        str(suites),
+        "--out",
+        str(out),
+        "--no-progress",
+        *extra,
+    ]
+
+
+def slow_run_command(suites: Path, out: Path, *extra: str) -> list[str]:
+    """``python -m awda_bench run`` of the fake suite with :class:`SlowPolicy` (a run to kill,
+    or to start twice at once); run it with :func:`slow_run_env`."""
+    argv = fake_suite_argv(suites, out, "--method", "harness_fakes:SlowPolicy", *extra)
+    return [sys.executable, "-m", "awda_bench", *argv]
+
+
+def slow_run_env(sleep_s: float) -> dict[str, str]:
+    """The environment of a :func:`slow_run_command` process: its workers import this module,
+    :class:`SlowPolicy` sleeps ``sleep_s`` per step, one OpenMP thread."""
+    tests = str(Path(__file__).resolve().parent)
+    return {
+        **os.environ,
+        "PYTHONPATH": tests,
+        "AWDA_FAKE_SLEEP_S": str(sleep_s),
+        "OMP_NUM_THREADS": "1",
+    }
+
+
+def report_runs(root: Path, *names: str) -> list[Path]:
+    """``awda report`` of each run directory ``root/name`` into ``root/rep-name`` (each must
+    succeed); returns the report directories."""
+    from awda_bench.cli import main
+
+    reports = []
+    for name in names:
+        report = root / f"rep-{name}"
+        assert main(["report", "--runs", str(root / name), "--out", str(report)]) == 0, name
+        reports.append(report)
+    return reports
+
+
+def run_fake_suite(suites: Path, out: Path, *extra: str) -> int:
+    """:func:`fake_suite_argv` through the CLI; returns its exit code."""
+    from awda_bench.cli import main
+
+    return main(fake_suite_argv(suites, out, *extra))
 
 
 def list_snapshots(directory: Path) -> list[Path]:

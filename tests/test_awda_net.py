@@ -10,6 +10,7 @@ import pytest
 import torch
 import torchvision
 from torch.utils.data import default_collate
+from training_helpers import fit_batch
 
 from awda_bench.errors import UsageError
 from awda_bench.models.awda_net import HEAD_NAMES, AwdaNet
@@ -151,14 +152,7 @@ def test_overfits_a_tiny_batch_and_predicts_its_waypoints() -> None:
         2, height_px=64, width_px=64, demo_frames=1, num_waypoints=1, grasped=(0,)
     )
     batch = default_collate([data[i] for i in range(2)])
-    optimizer = torch.optim.Adam(model.parameters(), lr=5e-4)
-    losses = []
-    for _ in range(250):
-        loss, info = model.compute_loss(batch)
-        optimizer.zero_grad()
-        loss.backward()
-        optimizer.step()
-        losses.append(info["loss"])
+    losses = fit_batch(model, batch)
     assert losses[-1] <= 0.1 * losses[0], (losses[0], losses[-1])
     goals = batch["waypoints"][:, 0]
     with torch.no_grad():  # training mode: the fit itself (measured: 0.8-1.2 cm)

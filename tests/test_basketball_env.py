@@ -1,18 +1,18 @@
 """AWDA-Basketball-v1: layout invariants (fast), basketball-specific env checks and the scripted
-expert (slow). The contract every env keeps is in ``test_env_contract.py``."""
+expert on the agent (slow). The contract every env keeps (the expert on the demonstrator included)
+is in ``test_env_contract.py``."""
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from task_env_helpers import run_expert, task_env_fixture
 
 from awda_bench.envs.basketball import BALLS, HOOPS, BallSpec, BasketballLayout
 from awda_bench.envs.layouts import sample_separated_xy
 from awda_bench.envs.static_props import HoopSpec
-from awda_bench.episode import EpisodeContext, EpisodeSpec
-from awda_bench.experts.basketball import BasketballExpert, BasketballExpertConfig
+from awda_bench.experts.basketball import BasketballExpert
 
 PANDA_OPEN_M = 0.08
 """Panda finger gap when open [m]."""
@@ -85,43 +85,14 @@ def test_spawn_sampler_keeps_separation_and_the_middle_band_free() -> None:
         )
 
 
-def test_expert_config_rejects_non_positive_values() -> None:
-    with pytest.raises(ValueError, match="release_clearance_m"):
-        BasketballExpertConfig(release_clearance_m=0.0)
-    with pytest.raises(ValueError, match="close_steps"):
-        BasketballExpertConfig(close_steps=0)
-    with pytest.raises(RuntimeError, match="reset"):
-        BasketballExpert().act(None)
-
-
 # ---------------------------------------------------------------------------- slow (simulation)
 
 
-@pytest.fixture(scope="module")
-def env():
-    import awda_bench.envs  # noqa: F401
-
-    e = gym.make("AWDA-Basketball-v1", obs_mode="state", reward_mode="none", num_envs=1)
-    yield e
-    e.close()
+env = task_env_fixture("AWDA-Basketball-v1")
 
 
 def _ball_state(env) -> np.ndarray:
     return torch.stack([b.pose.raw_pose for b in env.unwrapped.balls], dim=1).cpu().numpy()
-
-
-@pytest.mark.slow
-def test_make_reset_step(env) -> None:
-    base = env.unwrapped
-    assert base.family == "basketball" and base.num_variations == 12 and base.has_grasp_target
-    obs, info = env.reset(seed=0, options={"task": 7})
-    assert torch.isfinite(obs).all()
-    assert int(info["task"][0]) == 7 and not bool(info["success"][0])
-    assert int(base.target_ball_index[0]) == 1 and int(base.target_hoop_index[0]) == 3
-    obs, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
-    assert torch.isfinite(obs).all()
-    assert set(info) >= {"success", "success_once", "reached", "grasped", "goal_distance_m"}
-    assert set(base.truth_signals()) == {"grasp"}
 
 
 @pytest.mark.slow
@@ -153,43 +124,14 @@ def test_success_only_near_the_target_hoop(env) -> None:
     assert not bool(base.evaluate()["success"][0])
 
 
-def _rollout(env, task: int, seed: int, horizon: int = 300) -> tuple[int, dict]:
-    expert = BasketballExpert()
-    obs, _ = env.reset(seed=seed, options={"task": task})
-    spec = EpisodeSpec(suite="mosaic", task=task, episode=0, seed=seed, demo_seed=seed)
-    expert.reset(EpisodeContext(env=env.unwrapped, spec=spec))
-    info: dict = {}
-    for t in range(horizon):
-        action = expert.act(obs)
-        assert action.shape == (1, 4) and np.abs(action).max() <= 1.0
-        obs, _, _, _, info = env.step(action)
-        if expert.done:
-            return t + 1, info
-    return horizon, info
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize(("task", "seed"), [(0, 3), (11, 7)])
 def test_expert_puts_the_ball_in_the_hoop_with_the_agent(env, task: int, seed: int) -> None:
-    steps, info = _rollout(env, task, seed)
-    assert steps < 250
+    run = run_expert(env, BasketballExpert(), task, seed, horizon=300)
+    assert run.done and run.steps < 250
     for key in ("success", "success_once", "reached", "grasped"):
-        assert bool(info[key][0]), key
+        assert bool(run.info[key][0]), key
     # the ball rests in the net: still a success a second later
     for _ in range(20):
         _, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
     assert bool(info["success"][0])
-
-
-@pytest.mark.slow
-def test_expert_drives_the_demonstrator() -> None:
-    import awda_bench.envs  # noqa: F401
-
-    e = gym.make(
-        "AWDA-Basketball-v1", robot_uids="awda_demonstrator", obs_mode="state", reward_mode="none"
-    )
-    try:
-        steps, info = _rollout(e, task=5, seed=2)
-        assert steps < 250 and bool(info["success"][0])
-    finally:
-        e.close()

@@ -31,24 +31,31 @@ from awda_bench.episode import derive_seed
 from awda_bench.errors import CorruptFileError, UsageError
 from awda_bench.suites import load_suite
 
-TINY_ARGS = [
-    "collect",
-    "--suite",
-    "pick_place",
-    "--split",
-    "train",
-    "--embodiment",
-    "both",
-    "--episodes-per-task",
-    "2",
-    "--task",
-    "0",
-    "--synthesize",
-    "1",
-    "--image-size",
-    "64x80",
-    "--no-progress",
-]
+
+def tiny_collect_argv(embodiment: str = "both", episodes_per_task: int = 2) -> list[str]:
+    """A tiny collection's command line (without ``--out`` and ``--workers``): pick_place's
+    task 0, ``episodes_per_task`` of ``embodiment``, one synthesized episode, 64 x 80 images."""
+    return [
+        "collect",
+        "--suite",
+        "pick_place",
+        "--split",
+        "train",
+        "--embodiment",
+        embodiment,
+        "--episodes-per-task",
+        str(episodes_per_task),
+        "--task",
+        "0",
+        "--synthesize",
+        "1",
+        "--image-size",
+        "64x80",
+        "--no-progress",
+    ]
+
+
+TINY_ARGS = tiny_collect_argv()
 """The tiny collection's command line (without ``--out`` and ``--workers``)."""
 
 

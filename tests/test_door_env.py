@@ -1,17 +1,17 @@
-"""AWDA-Door-v1: geometry and config checks (fast), door-specific env checks and the scripted expert
-on both embodiments (slow). The contract every env keeps is in ``test_env_contract.py``."""
+"""AWDA-Door-v1: geometry and layout checks (fast), door-specific env checks and the scripted expert
+on the agent (slow). The contract every env keeps (the expert on the demonstrator included) is in
+``test_env_contract.py``."""
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from task_env_helpers import run_expert, task_env_fixture
 
 from awda_bench.envs.articulated import DoorCabinetSpec, hinge_joint_quat, rotate_z
 from awda_bench.envs.door import DoorLayout
-from awda_bench.episode import EpisodeContext, EpisodeSpec
-from awda_bench.experts.door import DoorExpert, DoorExpertConfig
+from awda_bench.experts.door import DoorExpert
 
 REST_HAND_HALF_LENGTH_M = 0.104
 """The Panda hand at the agent's rest pose spans |y| <= this around y = 0 [m]."""
@@ -66,7 +66,7 @@ def test_two_doors_differ_and_clear_the_resting_hand() -> None:
         )
 
 
-def test_layout_spec_and_expert_config_validate() -> None:
+def test_layout_and_spec_validate() -> None:
     with pytest.raises(ValueError, match="hinge_side"):
         DoorCabinetSpec(name="d", center_xy_m=(0, 0), hinge_side=0, panel_color=(1, 0, 0, 1))
     with pytest.raises(ValueError, match="handle_standoff_m"):
@@ -81,37 +81,19 @@ def test_layout_spec_and_expert_config_validate() -> None:
         DoorLayout(close_start_rad=(0.3, 0.5))
     with pytest.raises(ValueError, match="open_success_rad"):
         DoorLayout(open_success_rad=2.0)
-    with pytest.raises(ValueError, match="lead_rad"):
-        DoorExpertConfig(lead_rad=0.0)
-    with pytest.raises(ValueError, match="close_steps"):
-        DoorExpertConfig(close_steps=0)
 
 
 # ---------------------------------------------------------------------------- slow (simulation)
 
 
-@pytest.fixture(scope="module")
-def env():
-    import awda_bench.envs  # noqa: F401
-
-    e = gym.make("AWDA-Door-v1", obs_mode="state", reward_mode="none", num_envs=1)
-    yield e
-    e.close()
+env = task_env_fixture("AWDA-Door-v1")
 
 
 @pytest.mark.slow
-def test_make_reset_step(env) -> None:
+def test_doors_start_shut_to_be_opened_and_open_to_be_closed(env) -> None:
     base = env.unwrapped
-    assert base.robot_uids == "panda_awda" and base.family == "door"
-    assert base.num_variations == 4 and not base.has_grasp_target
-    obs, info = env.reset(seed=0, options={"task": 2})
-    assert torch.isfinite(obs).all()
-    assert int(info["task"][0]) == 2 and not bool(info["success"][0])
-    assert int(base.target_door[0]) == 1 and bool(base.wants_open[0])
+    env.reset(seed=0, options={"task": 2})  # open door 1
     np.testing.assert_allclose(base.door_angles().cpu().numpy(), 0.0, atol=1e-6)
-    obs, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
-    assert torch.isfinite(obs).all()
-    assert set(info) >= {"success", "success_once", "door_angle_rad", "task"}
     # close variations: both doors start open inside close_start_rad
     env.reset(seed=0, options={"task": 1})
     lo, hi = base.layout.close_start_rad
@@ -172,44 +154,12 @@ def test_success_thresholds_and_door_stays_where_left(env) -> None:
     assert not bool(base.evaluate()["success"][0])
 
 
-def _run_expert(env, task: int, seed: int, horizon: int = 200) -> tuple[bool, set[str]]:
-    """Run the expert; returns (success at the end, the truth signals seen true at some step)."""
-    base = env.unwrapped
-    obs, _ = env.reset(seed=seed, options={"task": task})
-    expert = DoorExpert()
-    spec = EpisodeSpec(suite="mosaic", task=task, episode=0, seed=seed, demo_seed=seed + 1)
-    expert.reset(EpisodeContext(env=base, spec=spec))
-    seen: set[str] = set()
-    info: dict = {}
-    for _ in range(horizon):
-        obs, _, _, _, info = env.step(expert.act(obs))
-        seen |= {k for k, v in base.truth_signals().items() if bool(v[0])}
-        if expert.done:
-            break
-    assert expert.done, f"expert did not finish within {horizon} steps"
-    return bool(info["success"][0]), seen
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize(("task", "seed"), [(0, 0), (3, 1)])
 def test_expert_succeeds_on_the_agent(env, task: int, seed: int) -> None:
-    success, seen = _run_expert(env, task, seed)
-    assert success
-    assert ("grasp" if task % 2 == 0 else "push") in seen
-
-
-@pytest.mark.slow
-def test_expert_succeeds_on_the_demonstrator() -> None:
-    import awda_bench.envs  # noqa: F401
-
-    e = gym.make(
-        "AWDA-Door-v1", robot_uids="awda_demonstrator", obs_mode="state", reward_mode="none"
-    )
-    try:
-        assert _run_expert(e, 2, 3)[0]
-        assert _run_expert(e, 1, 4)[0]
-    finally:
-        e.close()
+    run = run_expert(env, DoorExpert(), task, seed, horizon=200)
+    assert run.done and bool(run.info["success"][0])
+    assert run.signals["grasp" if task % 2 == 0 else "push"] > 0
 
 
 def test_hand_holds_a_handle_it_drags_with_one_finger_but_not_one_it_pushes_or_touches() -> None:

@@ -1,17 +1,17 @@
-"""AWDA-Drawer-v1: geometry and config checks (fast), drawer-specific env checks and the scripted
-expert on both embodiments (slow). The contract every env keeps is in ``test_env_contract.py``."""
+"""AWDA-Drawer-v1: geometry and layout checks (fast), drawer-specific env checks and the scripted
+expert on the agent (slow). The contract every env keeps (the expert on the demonstrator included)
+is in ``test_env_contract.py``."""
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from task_env_helpers import run_expert, task_env_fixture
 
 from awda_bench.envs.articulated import DrawerCabinetSpec, rotate_z
 from awda_bench.envs.drawer import DrawerLayout
-from awda_bench.episode import EpisodeContext, EpisodeSpec
-from awda_bench.experts.drawer import DrawerExpert, DrawerExpertConfig
+from awda_bench.experts.drawer import DrawerExpert
 
 REST_HAND_HALF_LENGTH_M = 0.104
 """The Panda hand at the agent's rest pose spans |y| <= this around y = 0 [m]."""
@@ -49,7 +49,7 @@ def test_cabinets_differ_and_handles_are_reachable_and_clear() -> None:
             assert z > 0
 
 
-def test_spec_layout_and_expert_config_validate() -> None:
+def test_spec_and_layout_validate() -> None:
     with pytest.raises(ValueError, match="apart"):
         DrawerCabinetSpec(name="c", center_xy_m=(0, 0), front_color=(1, 0, 0, 1), handle_y_m=(0, 0))
     with pytest.raises(ValueError, match="beyond the drawer front"):
@@ -60,35 +60,19 @@ def test_spec_layout_and_expert_config_validate() -> None:
         DrawerLayout(close_start_m=(0.05, 0.10))
     with pytest.raises(ValueError, match="close_success_m"):
         DrawerLayout(close_success_m=0.0)
-    with pytest.raises(ValueError, match="lead_m"):
-        DrawerExpertConfig(lead_m=0.0)
 
 
 # ---------------------------------------------------------------------------- slow (simulation)
 
 
-@pytest.fixture(scope="module")
-def env():
-    import awda_bench.envs  # noqa: F401
-
-    e = gym.make("AWDA-Drawer-v1", obs_mode="state", reward_mode="none", num_envs=1)
-    yield e
-    e.close()
+env = task_env_fixture("AWDA-Drawer-v1")
 
 
 @pytest.mark.slow
-def test_make_reset_step_and_initial_slides(env) -> None:
+def test_drawers_start_shut_to_be_opened_and_out_to_be_closed(env) -> None:
     base = env.unwrapped
-    assert base.robot_uids == "panda_awda" and base.family == "drawer"
-    assert base.num_variations == 8 and not base.has_grasp_target
-    obs, info = env.reset(seed=0, options={"task": 6})
-    assert torch.isfinite(obs).all()
-    assert int(info["task"][0]) == 6 and not bool(info["success"][0])
-    assert int(base.target_drawer[0]) == 3 and bool(base.wants_open[0])
+    env.reset(seed=0, options={"task": 6})  # open cabinet 1's upper drawer
     np.testing.assert_allclose(base.drawer_slides().cpu().numpy(), 0.0, atol=1e-6)
-    obs, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
-    assert torch.isfinite(obs).all()
-    assert set(info) >= {"success", "success_once", "drawer_slide_m", "task"}
     lo, hi = base.layout.close_start_m
     for seed in range(4):  # close: the target and one drawer of the other cabinet start out
         env.reset(seed=seed, options={"task": 3})  # cabinet 0, upper drawer
@@ -141,41 +125,9 @@ def test_success_thresholds_and_drawer_stays_where_left(env) -> None:
     assert not bool(base.evaluate()["success"][0])
 
 
-def _run_expert(env, task: int, seed: int, horizon: int = 200) -> tuple[bool, set[str]]:
-    """Run the expert; returns (success at the end, the truth signals seen true at some step)."""
-    base = env.unwrapped
-    obs, _ = env.reset(seed=seed, options={"task": task})
-    expert = DrawerExpert()
-    spec = EpisodeSpec(suite="mosaic", task=task, episode=0, seed=seed, demo_seed=seed + 1)
-    expert.reset(EpisodeContext(env=base, spec=spec))
-    seen: set[str] = set()
-    info: dict = {}
-    for _ in range(horizon):
-        obs, _, _, _, info = env.step(expert.act(obs))
-        seen |= {k for k, v in base.truth_signals().items() if bool(v[0])}
-        if expert.done:
-            break
-    assert expert.done, f"expert did not finish within {horizon} steps"
-    return bool(info["success"][0]), seen
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize(("task", "seed"), [(2, 0), (7, 1)])
 def test_expert_succeeds_on_the_agent(env, task: int, seed: int) -> None:
-    success, seen = _run_expert(env, task, seed)
-    assert success
-    assert ("grasp" if task % 2 == 0 else "push") in seen
-
-
-@pytest.mark.slow
-def test_expert_succeeds_on_the_demonstrator() -> None:
-    import awda_bench.envs  # noqa: F401
-
-    e = gym.make(
-        "AWDA-Drawer-v1", robot_uids="awda_demonstrator", obs_mode="state", reward_mode="none"
-    )
-    try:
-        assert _run_expert(e, 4, 3)[0]
-        assert _run_expert(e, 1, 4)[0]
-    finally:
-        e.close()
+    run = run_expert(env, DrawerExpert(), task, seed, horizon=200)
+    assert run.done and bool(run.info["success"][0])
+    assert run.signals["grasp" if task % 2 == 0 else "push"] > 0

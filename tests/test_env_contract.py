@@ -7,8 +7,12 @@ scene continues as the original would: planning on a copy, replaying a recording
 variations refused, and nothing touching the robot at its rest pose (a contact there carries
 from one episode into the next).
 
+Per task, what its family tells: the family's name, its variations, its ``info`` keys and truth
+signals (:data:`TASK_FACTS`); and the family's scripted expert solves variations on the
+demonstrator. What only one task checks stays in its ``test_*_env.py``.
+
 Each (env, embodiment) pair is built once per module (``env`` fixture); state observations, a
-handful of steps per test.
+handful of steps per test (an expert's episode: up to :data:`EXPERT_HORIZON`).
 """
 
 from __future__ import annotations
@@ -16,6 +20,7 @@ from __future__ import annotations
 import json
 import re
 from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -23,12 +28,13 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from task_env_helpers import AGENT, DEMONSTRATOR, make_task_env, run_expert
 
 from awda_bench.envs.embodiments import embodiment
+from awda_bench.envs.stack_block import STACK_ORDERS
 from awda_bench.errors import UsageError
+from awda_bench.experts import FAMILY_EXPERTS
 
-AGENT = "panda_awda"
-DEMONSTRATOR = "awda_demonstrator"
 EMBODIMENTS_UNDER_TEST = (AGENT, DEMONSTRATOR)
 """The benchmark's two embodiments (ManiSkill's stock ``panda`` is accepted but not ours)."""
 
@@ -46,6 +52,68 @@ CASES = [(env_id, robot) for env_id in TASK_ENV_IDS for robot in EMBODIMENTS_UND
 ]
 """Every registered env with every embodiment of ours it supports (checked against the registry
 by :func:`test_every_registered_env_and_embodiment_is_covered`)."""
+
+TASK_CASES = [case for case in CASES if case[0] in TASK_ENV_IDS]
+"""The tasks' cases (the empty table is no task)."""
+
+
+@dataclass(frozen=True)
+class TaskFacts:
+    """What a task env tells about itself and its episodes."""
+
+    family: str
+    num_variations: int
+    has_grasp_target: bool
+    truth_signals: set[str]
+    """The names ``truth_signals()`` returns."""
+    info_keys: set[str]
+    """Keys ``info`` has after a step, besides ``success``, ``success_once`` and ``task``."""
+    task: int
+    """A variation to reset to (not a success at reset, nor after one step holding still)."""
+    picks: dict[str, int]
+    """What variation :attr:`task` picks: env attribute -> its value right after the reset."""
+    success_persists: bool = True
+    """``success`` still holds once the expert is done (a pressed button springs back)."""
+    expert_runs: tuple[tuple[int, int], ...] = ()
+    """(variation, seed) per episode the scripted expert solves on the demonstrator."""
+
+
+GRASP_INFO = {"reached", "grasped"}
+TASK_FACTS = {
+    "AWDA-Basketball-v1": TaskFacts(
+        "basketball", 12, True, {"grasp"}, GRASP_INFO | {"goal_distance_m"}, task=7,
+        picks={"target_ball_index": 1, "target_hoop_index": 3}, expert_runs=((5, 2),),
+    ),
+    "AWDA-Door-v1": TaskFacts(
+        "door", 4, False, {"grasp", "push"}, {"door_angle_rad"}, task=2,
+        picks={"target_door": 1, "wants_open": True}, expert_runs=((2, 3), (1, 4)),
+    ),
+    "AWDA-Drawer-v1": TaskFacts(
+        "drawer", 8, False, {"grasp", "push"}, {"drawer_slide_m"}, task=6,
+        picks={"target_drawer": 3, "wants_open": True}, expert_runs=((4, 3), (1, 4)),
+    ),
+    "AWDA-NutAssembly-v1": TaskFacts(
+        "nut_assembly", 9, True, {"grasp"}, GRASP_INFO | {"xy_error_m"}, task=5,
+        picks={"target_nut_index": 1, "target_peg_index": 2}, expert_runs=((4, 2),),
+    ),
+    "AWDA-PickPlace-v1": TaskFacts(
+        "pick_place", 16, True, {"grasp"}, GRASP_INFO | {"target_distance_m"}, task=5,
+        picks={}, expert_runs=((4, 2),),
+    ),
+    "AWDA-PressButton-v1": TaskFacts(
+        "press_button", 6, False, {"grasp", "press"}, {"button_depth_m"}, task=4,
+        picks={"target_panel": 1, "target_button": 1}, success_persists=False,
+        expert_runs=((1, 2),),
+    ),
+    "AWDA-StackBlock-v1": TaskFacts(
+        "stack_block", 6, True, {"grasp"}, GRASP_INFO | {"is_grasped"}, task=3,
+        picks=dict(zip(("cube_a", "cube_b"), STACK_ORDERS[3], strict=True)),
+        expert_runs=((4, 2),),
+    ),
+}  # fmt: skip
+
+EXPERT_HORIZON = 200
+"""Steps a scripted expert may take to finish an episode."""
 
 FIXED_ROOT_ULP = 1e-6
 """PhysX reads some fixed articulation roots back one float32 ulp apart from one control step to
@@ -86,6 +154,7 @@ def test_every_registered_env_and_embodiment_is_covered() -> None:
         if robot in REGISTERED_ENVS[env_id].cls.SUPPORTED_ROBOTS
     ]
     assert sorted(CASES) == sorted(expected)
+    assert sorted(TASK_FACTS) == sorted(TASK_ENV_IDS)
 
 
 # ---------------------------------------------------------------------------- helpers
@@ -93,12 +162,9 @@ def test_every_registered_env_and_embodiment_is_covered() -> None:
 
 @pytest.fixture(scope="module", params=CASES, ids=_case_id)
 def env(request: pytest.FixtureRequest) -> Iterator[gym.Env]:
-    import awda_bench.envs  # noqa: F401
-
+    """The case's env; the agent's as callers build it, with the env's default embodiment."""
     env_id, robot = request.param
-    e = gym.make(
-        env_id, obs_mode="state", reward_mode="none", robot_uids=robot, render_mode="rgb_array"
-    )
+    e = make_task_env(env_id, None if robot == AGENT else robot, render_mode="rgb_array")
     yield e
     e.close()
 
@@ -178,6 +244,42 @@ def test_make_reset_step(env: gym.Env) -> None:
         assert obs.shape == (1, base.single_observation_space.shape[-1])
         assert torch.isfinite(obs).all()
         assert info["success"].shape == (1,) and info["success"].dtype == torch.bool
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("env", TASK_CASES, indirect=True, ids=_case_id)
+def test_task_facts_and_what_reset_and_step_tell(
+    env: gym.Env, request: pytest.FixtureRequest
+) -> None:
+    base = env.unwrapped
+    facts = TASK_FACTS[base.spec.id]
+    assert base.robot_uids == request.node.callspec.params["env"][1]  # the agent: the default
+    assert (base.family, base.num_variations) == (facts.family, facts.num_variations)
+    assert base.has_grasp_target == facts.has_grasp_target
+    assert set(base.truth_signals()) == facts.truth_signals
+    obs, info = env.reset(seed=0, options={"task": facts.task})
+    assert torch.isfinite(obs).all()
+    assert int(info["task"][0]) == facts.task and not bool(info["success"][0])
+    assert {name: int(getattr(base, name)[0]) for name in facts.picks} == facts.picks
+    obs, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+    assert torch.isfinite(obs).all() and not bool(info["success"][0])
+    assert set(info) >= {"success", "success_once", "task"} | facts.info_keys
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    "env", [case for case in TASK_CASES if case[1] == DEMONSTRATOR], indirect=True, ids=_case_id
+)
+def test_the_familys_scripted_expert_solves_variations_on_the_demonstrator(env: gym.Env) -> None:
+    base = env.unwrapped
+    facts = TASK_FACTS[base.spec.id]
+    assert facts.expert_runs
+    for task, seed in facts.expert_runs:
+        run = run_expert(env, FAMILY_EXPERTS[base.family](), task, seed, EXPERT_HORIZON)
+        where = f"variation {task}, seed {seed}"
+        assert run.done, f"{where}: the expert did not finish within {EXPERT_HORIZON} steps"
+        assert bool(run.info["success_once"][0]), where
+        assert bool(run.info["success"][0]) == facts.success_persists, where
 
 
 @pytest.mark.slow
@@ -410,13 +512,7 @@ def test_record_episode_writes_trajectory_and_video(
 
     base = env.unwrapped
     # the wrapper closes the env it wraps: record through a fresh one, keep the module's
-    fresh = gym.make(
-        base.spec.id,
-        obs_mode="state",
-        reward_mode="none",
-        robot_uids=base.robot_uids,
-        render_mode="rgb_array",
-    )
+    fresh = make_task_env(base.spec.id, base.robot_uids, render_mode="rgb_array")
     if not render_pipeline_keeper:
         render_pipeline_keeper.append(fresh.unwrapped.scene.sub_scenes[0].render_system)
     recorder = RecordEpisode(

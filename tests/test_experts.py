@@ -1,4 +1,6 @@
-"""Scripted experts: construction errors (fast); success and determinism in simulation (slow)."""
+"""Scripted experts: every family's construction errors (fast); success and determinism in
+simulation (slow). Each family's expert solving its task on the demonstrator is part of the env
+contract (``test_env_contract.py``)."""
 
 from __future__ import annotations
 
@@ -7,7 +9,13 @@ import pytest
 
 from awda_bench.episode import EpisodeContext, EpisodeSpec, Policy
 from awda_bench.errors import UnknownChoiceError
-from awda_bench.experts import PickPlaceExpertConfig, make_expert
+from awda_bench.experts import FAMILY_EXPERTS, PickPlaceExpertConfig, make_expert
+from awda_bench.experts.basketball import BasketballExpertConfig
+from awda_bench.experts.door import DoorExpertConfig
+from awda_bench.experts.drawer import DrawerExpertConfig
+from awda_bench.experts.nut_assembly import NutAssemblyExpertConfig
+from awda_bench.experts.press_button import PressButtonExpertConfig
+from awda_bench.experts.stack_block import StackBlockExpertConfig
 
 
 def test_make_expert_returns_a_policy_and_rejects_unknown_names() -> None:
@@ -20,16 +28,38 @@ def test_make_expert_returns_a_policy_and_rejects_unknown_names() -> None:
         make_expert("pick_place", "sawyer")
 
 
-def test_config_rejects_non_positive_values() -> None:
-    with pytest.raises(ValueError, match="grasp_depth_m"):
-        PickPlaceExpertConfig(grasp_depth_m=0.0)
-    with pytest.raises(ValueError, match="close_steps"):
-        PickPlaceExpertConfig(close_steps=0)
+POSITIVE_FIELDS = {
+    BasketballExpertConfig: ("release_clearance_m", "close_steps"),
+    DoorExpertConfig: ("lead_rad", "close_steps"),
+    DrawerExpertConfig: ("lead_m",),
+    NutAssemblyExpertConfig: ("xy_tolerance_m", "release_steps"),
+    PickPlaceExpertConfig: ("grasp_depth_m", "close_steps"),
+    PressButtonExpertConfig: ("hold_steps",),
+    StackBlockExpertConfig: ("carry_xy_tolerance_m", "release_steps"),
+}
+"""Per family's expert config, fields that must be positive."""
+CONFIG_REFUSALS = [
+    (config, field) for config, fields in POSITIVE_FIELDS.items() for field in fields
+]
 
 
-def test_act_before_reset_is_an_error() -> None:
+@pytest.mark.parametrize(
+    ("config", "field"),
+    CONFIG_REFUSALS,
+    ids=[f"{c.__name__.removesuffix('ExpertConfig')}-{f}" for c, f in CONFIG_REFUSALS],
+)
+def test_config_rejects_non_positive_values(config: type, field: str) -> None:
+    with pytest.raises(ValueError, match=field):
+        config(**{field: 0})
+
+
+@pytest.mark.parametrize("family", sorted(FAMILY_EXPERTS))
+def test_act_before_reset_is_an_error(family: str) -> None:
     with pytest.raises(RuntimeError, match="reset"):
-        make_expert("pick_place").act(None)
+        FAMILY_EXPERTS[family]().act(None)
+    if family == "pick_place":  # also as make_expert builds it
+        with pytest.raises(RuntimeError, match="reset"):
+            make_expert("pick_place").act(None)
 
 
 def _rollout(env, task: int, seed: int, embodiment: str, horizon: int = 300):

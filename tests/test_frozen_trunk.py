@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
-from test_collect import tiny_collection_dir
+from training_helpers import FROZEN_LITE0, TINY_NET, CountingEncoder, recipe_toml
 
 from awda_bench.cli import main
 from awda_bench.data.datasets import AwdaPairDataset, CollectedData
@@ -204,31 +204,11 @@ def test_fine_tuned_top_blocks_train_over_cached_maps_and_nothing_else_of_the_tr
 
 
 # ----------------------------------------------------------------------------- tiny collection
-@pytest.fixture(scope="module")
-def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tiny_collection_dir(tmp_path_factory)
-
-
-class CountingEncoder:
-    def __init__(self) -> None:
-        self.frames = 0
-        torch.manual_seed(0)
-        self.conv = torch.nn.Conv2d(3, 4, kernel_size=16, stride=16)
-
-    def __call__(self, images: torch.Tensor) -> torch.Tensor:
-        self.frames += len(images)
-        return self.conv(images)
-
-
 @pytest.mark.slow
 def test_cache_is_built_once_reused_and_rebuilt_when_damaged(
-    tiny: Path, tmp_path: Path, caplog: pytest.LogCaptureFixture
+    tiny_copy: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
-    import shutil
-
-    data_dir = tmp_path / "data"
-    shutil.copytree(tiny, data_dir)
-    data = CollectedData(data_dir)
+    data = CollectedData(tiny_copy)
     pairs = AwdaPairDataset(data, image_size=(64, 80))
     needed = frames_needed(pairs)
     encoder = CountingEncoder()
@@ -267,18 +247,12 @@ def test_cache_is_built_once_reused_and_rebuilt_when_damaged(
 
 
 @pytest.mark.slow
-def test_cached_features_are_what_the_model_computes_at_evaluation(
-    tiny: Path, tmp_path: Path
-) -> None:
+def test_cached_features_are_what_the_model_computes_at_evaluation(tiny_copy: Path) -> None:
     """A cached frame's features equal the frozen trunk's in eval mode on that frame alone (what
     ``run`` computes live), whoever asked for the cache: batch norm in training mode would make a
     frame's features depend on the frames encoded with it, and training and evaluation would then
     see different inputs (session 11: every frozen-trunk snapshot before it did)."""
-    import shutil
-
-    data_dir = tmp_path / "data"
-    shutil.copytree(tiny, data_dir)
-    data = CollectedData(data_dir)
+    data = CollectedData(tiny_copy)
     trunk = replace(LITE0, image_height_px=64, image_width_px=80)
     pairs = AwdaPairDataset(data, image_size=(64, 80))
     sample = CachedAwdaPairs(
@@ -297,40 +271,14 @@ def test_cached_features_are_what_the_model_computes_at_evaluation(
     data.close()
 
 
-FROZEN_RECIPE = """
-name = "tiny-frozen"
-suites = ["pick_place", "mosaic"]
-[model]
-image_height_px = 64
-image_width_px = 80
-attention_layers = 1
-attention_heads = 2
-attention_head_dim = 16
-head_hidden_dim = 32
-backbone = "efficientnet-lite0"
-backbone_stride = 16
-freeze_backbone = true
-backbone_weights = "imagenet"
-head = "demo-to-scene"
-[train]
-batch_size = 2
-max_steps = 6
-snapshot_every_steps = 2
-validate_every_steps = 5
-validation_batches = 1
-[augment]
-shift_px = 0
-"""
+FROZEN_RECIPE = recipe_toml("tiny-frozen", {**TINY_NET, **FROZEN_LITE0, "head": "demo-to-scene"})
 
 
 @pytest.mark.slow
 def test_frozen_recipe_trains_from_the_cache_and_resumes_the_identical_curve(
-    tiny: Path, tmp_path: Path
+    tiny_copy: Path, tmp_path: Path
 ) -> None:
-    import shutil
-
-    data_dir = tmp_path / "data"
-    shutil.copytree(tiny, data_dir)
+    data_dir = tiny_copy
     recipe = tmp_path / "frozen.toml"
     recipe.write_text(FROZEN_RECIPE)
     common = ["--method", "awda", "--data", str(data_dir), "--recipe", str(recipe), "--steps", "6"]

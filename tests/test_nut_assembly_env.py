@@ -1,17 +1,17 @@
 """AWDA-NutAssembly-v1: geometry invariants (fast), nut-specific env checks and the scripted expert
-(slow). The contract every env keeps is in ``test_env_contract.py``."""
+on the agent (slow). The contract every env keeps (the expert on the demonstrator included) is in
+``test_env_contract.py``."""
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from task_env_helpers import run_expert, task_env_fixture
 
 from awda_bench.envs.nut_assembly import NUTS, PEGS, NutAssemblyLayout, NutSpec
 from awda_bench.envs.static_props import PegSpec
-from awda_bench.episode import EpisodeContext, EpisodeSpec
-from awda_bench.experts.nut_assembly import NutAssemblyExpert, NutAssemblyExpertConfig
+from awda_bench.experts.nut_assembly import NutAssemblyExpert
 
 PANDA_OPEN_M = 0.08
 """Panda finger gap when open [m]."""
@@ -51,38 +51,17 @@ def test_nuts_and_pegs_are_distinct() -> None:
     assert peg.base_z_m == pytest.approx(0.006) and peg.top_z_m == pytest.approx(0.096)
 
 
-def test_expert_config_rejects_non_positive_values() -> None:
-    with pytest.raises(ValueError, match="xy_tolerance_m"):
-        NutAssemblyExpertConfig(xy_tolerance_m=0.0)
-    with pytest.raises(ValueError, match="release_steps"):
-        NutAssemblyExpertConfig(release_steps=0)
-    with pytest.raises(RuntimeError, match="reset"):
-        NutAssemblyExpert().act(None)
-
-
 # ---------------------------------------------------------------------------- slow (simulation)
 
 
-@pytest.fixture(scope="module")
-def env():
-    import awda_bench.envs  # noqa: F401
-
-    e = gym.make("AWDA-NutAssembly-v1", obs_mode="state", reward_mode="none", num_envs=1)
-    yield e
-    e.close()
+env = task_env_fixture("AWDA-NutAssembly-v1")
 
 
 @pytest.mark.slow
-def test_make_reset_step(env) -> None:
+def test_nuts_start_with_their_handles_roughly_towards_the_robot(env) -> None:
     base = env.unwrapped
-    assert base.family == "nut_assembly" and base.num_variations == 9 and base.has_grasp_target
-    obs, info = env.reset(seed=0, options={"task": 5})
-    assert torch.isfinite(obs).all()
-    assert int(info["task"][0]) == 5 and not bool(info["success"][0])
-    assert int(base.target_nut_index[0]) == 1 and int(base.target_peg_index[0]) == 2
-    obs, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
-    assert torch.isfinite(obs).all()
-    assert set(info) >= {"success", "success_once", "reached", "grasped", "xy_error_m"}
+    env.reset(seed=0, options={"task": 5})
+    env.step(np.zeros(4, dtype=np.float32))
     # nuts lie flat, handles roughly towards the robot
     lay = base.layout
     _, quat = base.nut_poses()
@@ -113,43 +92,14 @@ def test_success_needs_the_right_peg_the_bottom_and_the_gripper_away(env) -> Non
     assert float(info["tcp_clearance_m"][0]) == pytest.approx(0.0, abs=1e-6)
 
 
-def _rollout(env, task: int, seed: int, horizon: int = 300) -> tuple[int, dict]:
-    expert = NutAssemblyExpert()
-    obs, _ = env.reset(seed=seed, options={"task": task})
-    spec = EpisodeSpec(suite="mosaic", task=task, episode=0, seed=seed, demo_seed=seed)
-    expert.reset(EpisodeContext(env=env.unwrapped, spec=spec))
-    info: dict = {}
-    for t in range(horizon):
-        action = expert.act(obs)
-        assert action.shape == (1, 4) and np.abs(action).max() <= 1.0
-        obs, _, _, _, info = env.step(action)
-        if expert.done:
-            return t + 1, info
-    return horizon, info
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize(("task", "seed"), [(0, 3), (8, 6)])
 def test_expert_puts_the_nut_on_the_peg_with_the_agent(env, task: int, seed: int) -> None:
-    steps, info = _rollout(env, task, seed)
-    assert steps < 250
+    run = run_expert(env, NutAssemblyExpert(), task, seed, horizon=300)
+    assert run.done and run.steps < 250
     for key in ("success", "success_once", "reached", "grasped"):
-        assert bool(info[key][0]), key
-    assert float(info["height_m"][0]) < 0.005
-
-
-@pytest.mark.slow
-def test_expert_drives_the_demonstrator() -> None:
-    import awda_bench.envs  # noqa: F401
-
-    e = gym.make(
-        "AWDA-NutAssembly-v1", robot_uids="awda_demonstrator", obs_mode="state", reward_mode="none"
-    )
-    try:
-        steps, info = _rollout(e, task=4, seed=2)
-        assert steps < 250 and bool(info["success"][0])
-    finally:
-        e.close()
+        assert bool(run.info[key][0]), key
+    assert float(run.info["height_m"][0]) < 0.005
 
 
 def test_rotate_matches_mani_skill_quaternion_apply() -> None:

@@ -7,13 +7,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from harness_fakes import write_fake_suite
+from harness_fakes import fake_suites_dir, fake_sweep_config
 
 from awda_bench.episode import EpisodeContext, EpisodeSpec, is_privileged
 from awda_bench.errors import PrivilegedAccessError
 from awda_bench.evaluation.methods import MethodSpec, register_method, unregister_method
 from awda_bench.evaluation.results_store import ResultsStore
-from awda_bench.evaluation.sweep import SweepConfig, run_sweep
+from awda_bench.evaluation.sweep import run_sweep
 
 METHODS = (
     MethodSpec("env-reading", "harness_fakes:EnvReadingPolicy"),
@@ -33,21 +33,9 @@ def fake_methods():
 
 
 def _sweep(tmp_path: Path, method: str, out: Path | None = None):
-    suites = tmp_path / "tasks"
-    suites.mkdir(exist_ok=True)
-    write_fake_suite(suites)
     out = out or tmp_path / method
-    config = SweepConfig(
-        suite="fake",
-        out=out,
-        suites_dir=suites,
-        progress=False,
-        command="test",
-        method=method,
-        workers=0,
-        episodes=3,
-    )
-    return run_sweep(config), out
+    suites = fake_suites_dir(tmp_path / "tasks")
+    return run_sweep(fake_sweep_config(suites, out, method, episodes=3)), out
 
 
 def test_reading_the_env_is_an_error_naming_the_rule_and_the_run_goes_on(tmp_path: Path) -> None:

@@ -1,12 +1,13 @@
 """AWDA-PickPlace-v1: geometry helpers (fast), pick-place-specific env checks (slow). The contract
-every env keeps is in ``test_env_contract.py``."""
+every env keeps (reset and step shapes, the default embodiment, the info keys) is in
+``test_env_contract.py``."""
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from task_env_helpers import DEMONSTRATOR, assert_spread_out, make_task_env, task_env_fixture
 
 from awda_bench.envs.bins import BinSpec
 from awda_bench.envs.embodiments import EMBODIMENTS, embodiment
@@ -99,33 +100,7 @@ def test_embodiment_grip_sign_conversion() -> None:
 # ---------------------------------------------------------------------------- slow (simulation)
 
 
-@pytest.fixture(scope="module")
-def env():
-    import awda_bench.envs  # noqa: F401
-
-    e = gym.make("AWDA-PickPlace-v1", obs_mode="state", reward_mode="none", num_envs=1)
-    yield e
-    e.close()
-
-
-@pytest.mark.slow
-def test_make_reset_step_default_agent(env) -> None:
-    base = env.unwrapped
-    assert base.robot_uids == "panda_awda"
-    assert env.action_space.shape == (4,)
-    obs, info = env.reset(seed=0, options={"task": 5})
-    assert torch.isfinite(obs).all()
-    assert int(info["task"][0]) == 5 and not bool(info["success"][0])
-    obs, reward, terminated, truncated, info = env.step(np.zeros(4, dtype=np.float32))
-    assert torch.isfinite(obs).all()
-    assert set(info) >= {"success", "reached", "grasped", "success_once", "target_distance_m"}
-
-
-@pytest.mark.slow
-def test_observation_size_is_constant(env) -> None:
-    obs, _ = env.reset(seed=0)
-    obs_step, *_ = env.step(np.zeros(4, dtype=np.float32))
-    assert obs.shape == obs_step.shape == (1, env.unwrapped.single_observation_space.shape[-1])
+env = task_env_fixture("AWDA-PickPlace-v1")
 
 
 @pytest.mark.slow
@@ -135,18 +110,12 @@ def test_layouts_respect_separation_and_spawn_area(env) -> None:
     for seed in range(8):
         env.reset(seed=seed)
         xy = env.unwrapped.object_poses()[0][0, :, :2].cpu().numpy()
-        d = np.linalg.norm(xy[:, None] - xy[None], axis=-1) + np.eye(4)
-        assert d.min() >= lay.min_separation_m - 1e-6
-        assert (np.abs(xy - center) <= np.array(lay.spawn_half_size_m) + 1e-6).all()
+        assert_spread_out(xy, center, lay.spawn_half_size_m, lay.min_separation_m)
 
 
 @pytest.mark.slow
 def test_demonstrator_env_rejects_nan_and_keeps_its_rest_pose() -> None:
-    import awda_bench.envs  # noqa: F401
-
-    demo = gym.make(
-        "AWDA-PickPlace-v1", robot_uids="awda_demonstrator", obs_mode="state", reward_mode="none"
-    )
+    demo = make_task_env("AWDA-PickPlace-v1", DEMONSTRATOR)
     try:
         demo.reset(seed=0)
         tcp = demo.unwrapped.agent.tcp_pose.p.clone()

@@ -3,14 +3,13 @@ env keeps is in ``test_env_contract.py``."""
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from task_env_helpers import run_expert, task_env_fixture
 
 from awda_bench.envs.press_button import PressButtonLayout
-from awda_bench.episode import EpisodeContext, EpisodeSpec
-from awda_bench.experts.press_button import PressButtonExpert, PressButtonExpertConfig
+from awda_bench.experts.press_button import PressButtonExpert
 
 # ---------------------------------------------------------------------------- fast
 
@@ -26,27 +25,19 @@ def test_layout_has_two_distinct_panels_and_six_distinct_buttons() -> None:
     assert 0 < lay.success_depth_m < lay.travel_m <= lay.protrusion_m
 
 
-def test_layout_and_expert_config_validate() -> None:
+def test_layout_validates() -> None:
     with pytest.raises(ValueError, match="success_depth_m"):
         PressButtonLayout(success_depth_m=0.03)
     with pytest.raises(ValueError, match="travel_m"):
         PressButtonLayout(travel_m=0.03, success_depth_m=0.02)
     with pytest.raises(ValueError, match="2 panels"):
         PressButtonLayout(panels=PressButtonLayout().panels[:1])
-    with pytest.raises(ValueError, match="hold_steps"):
-        PressButtonExpertConfig(hold_steps=0)
 
 
 # ---------------------------------------------------------------------------- slow (simulation)
 
 
-@pytest.fixture(scope="module")
-def env():
-    import awda_bench.envs  # noqa: F401
-
-    e = gym.make("AWDA-PressButton-v1", obs_mode="state", reward_mode="none", num_envs=1)
-    yield e
-    e.close()
+env = task_env_fixture("AWDA-PressButton-v1")
 
 
 def _panel_poses(env) -> np.ndarray:
@@ -54,17 +45,10 @@ def _panel_poses(env) -> np.ndarray:
 
 
 @pytest.mark.slow
-def test_make_reset_step(env) -> None:
+def test_no_button_starts_pressed(env) -> None:
     base = env.unwrapped
-    assert base.robot_uids == "panda_awda" and base.family == "press_button"
-    assert base.num_variations == 6 and not base.has_grasp_target
-    obs, info = env.reset(seed=0, options={"task": 4})
-    assert torch.isfinite(obs).all()
-    assert int(info["task"][0]) == 4 and not bool(info["success"][0])
-    assert int(base.target_panel[0]) == 1 and int(base.target_button[0]) == 1
-    obs, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
-    assert torch.isfinite(obs).all()
-    assert set(info) >= {"success", "success_once", "button_depth_m", "task"}
+    env.reset(seed=0, options={"task": 4})
+    env.step(np.zeros(4, dtype=np.float32))
     np.testing.assert_allclose(base.button_qpos().cpu().numpy(), 0.0, atol=1e-4)
 
 
@@ -111,19 +95,17 @@ def test_success_only_for_the_target_button_and_buttons_spring_back(env) -> None
 @pytest.mark.parametrize(("task", "seed"), [(1, 0), (5, 3)])
 def test_expert_presses_the_button_and_the_press_truth_fires(env, task: int, seed: int) -> None:
     base = env.unwrapped
-    obs, _ = env.reset(seed=seed, options={"task": task})
+    depths: list[np.ndarray] = []  # per step, how deep each button is pressed [m]
     expert = PressButtonExpert()
-    spec = EpisodeSpec(suite="mosaic", task=task, episode=0, seed=seed, demo_seed=seed)
-    expert.reset(EpisodeContext(env=base, spec=spec))
-    pressing, others_max = [], 0.0
-    for _ in range(160):
-        obs, _, _, _, info = env.step(expert.act(obs))
-        pressing.append(bool(base.truth_signals()["press"][0]))
-        depths = -base.button_qpos()[0].cpu().numpy()
-        others_max = max(others_max, float(np.delete(depths, task).max()))
-        if expert.done:
-            break
-    assert expert.done and bool(info["success_once"][0])
-    assert not bool(info["success"][0])  # released: the button popped back
-    assert sum(pressing) >= expert.config.hold_steps
-    assert others_max < 0.002  # no other button was pushed
+    run = run_expert(
+        env,
+        expert,
+        task,
+        seed,
+        horizon=160,
+        on_step=lambda: depths.append(-base.button_qpos()[0].cpu().numpy()),
+    )
+    assert run.done and bool(run.info["success_once"][0])
+    assert not bool(run.info["success"][0])  # released: the button popped back
+    assert run.signals["press"] >= expert.config.hold_steps
+    assert np.delete(np.stack(depths), task, axis=1).max() < 0.002  # no other button was pushed

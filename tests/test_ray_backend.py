@@ -6,7 +6,6 @@ when Ray is missing. Every test starts (and stops) its own Ray instance: ~3-5 s 
 
 from __future__ import annotations
 
-import hashlib
 import os
 import signal
 import sqlite3
@@ -17,7 +16,14 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from harness_fakes import write_fake_suite
+from harness_fakes import (
+    report_runs,
+    run_fake_suite,
+    slow_run_command,
+    slow_run_env,
+    write_fake_suite,
+)
+from test_collect import tiny_collect_argv, tree_digest
 
 from awda_bench.cli import main
 from awda_bench.evaluation.episode_record import STATUS_ERROR, STATUS_OK, EpisodeRecord
@@ -36,7 +42,6 @@ else:
 from awda_bench.evaluation.episode_pools import RayWorkerPool  # noqa: E402
 from awda_bench.execution.ray_pool import LOST_WORKER_RETRIES  # noqa: E402
 
-TESTS = Path(__file__).resolve().parent
 FAKES = "harness_fakes"
 BUILTIN = SnapshotRef(sha256=BUILTIN_SNAPSHOT, name=BUILTIN_SNAPSHOT, path=None, order=0)
 
@@ -45,22 +50,6 @@ BUILTIN = SnapshotRef(sha256=BUILTIN_SNAPSHOT, name=BUILTIN_SNAPSHOT, path=None,
 def no_ray_left_running():
     yield
     assert not ray.is_initialized(), "a test left Ray running"
-
-
-def _run(suites: Path, out: Path, *extra: str) -> int:
-    return main(
-        [
-            "run",
-            "--suite",
-            "fake",
-            "--tasks-dir",
-            str(suites),
-            "--out",
-            str(out),
-            "--no-progress",
-            *extra,
-        ]
-    )
 
 
 def _outcomes(out: Path) -> list[tuple]:
@@ -98,18 +87,14 @@ def test_ray_and_local_backends_give_identical_outcomes_and_tables(
 ) -> None:
     """The CI check of the Ray backend: 4 episodes (2 held-out tasks x 2) on 2 actors."""
     common = ("--method", f"{FAKES}:SkillPolicy", "--episodes", "2", "--workers", "2")
-    assert _run(suites, tmp_path / "local", *common, "--backend", "local") == 0
-    assert _run(suites, tmp_path / "ray", *common, "--backend", "ray") == 0
+    assert run_fake_suite(suites, tmp_path / "local", *common, "--backend", "local") == 0
+    assert run_fake_suite(suites, tmp_path / "ray", *common, "--backend", "ray") == 0
     assert "4 episodes planned, 0 already done, 4 played (0 errors)" in capsys.readouterr().out
     local, on_ray = _outcomes(tmp_path / "local"), _outcomes(tmp_path / "ray")
     assert len(local) == 4 and {r[6] for r in local} == {STATUS_OK}
     assert 0 < sum(r[7] for r in local) < 4  # outcomes differ by seed: a real comparison
     assert on_ray == local
-    for name in ("local", "ray"):
-        assert (
-            main(["report", "--runs", str(tmp_path / name), "--out", str(tmp_path / f"rep-{name}")])
-            == 0
-        )
+    report_runs(tmp_path, "local", "ray")
     local_files = sorted(p.name for p in (tmp_path / "rep-local").iterdir())
     assert {"s3.md", "s4.csv", "per_snapshot.csv", "counts.csv", "summary.json"} <= set(local_files)
     assert sorted(p.name for p in (tmp_path / "rep-ray").iterdir()) == local_files
@@ -119,7 +104,7 @@ def test_ray_and_local_backends_give_identical_outcomes_and_tables(
             texts = [_without_provenance(t) for t in texts]
         assert texts[0] == texts[1], name
     # resume keeps its meaning: nothing left to play
-    assert _run(suites, tmp_path / "ray", *common, "--backend", "ray") == 0
+    assert run_fake_suite(suites, tmp_path / "ray", *common, "--backend", "ray") == 0
     assert "4 already done, 0 played" in capsys.readouterr().out
 
 
@@ -180,7 +165,9 @@ def test_an_episode_that_kills_its_worker_every_time_ends_as_one_error(suites: P
 def test_watchdog_ends_a_hung_episode_on_ray(tmp_path: Path, suites: Path) -> None:
     out = tmp_path / "run"
     extra = ("--method", f"{FAKES}:HangingPolicy", "--episodes", "3", "--task", "2")
-    code = _run(suites, out, *extra, "--workers", "2", "--backend", "ray", "--episode-timeout", "3")
+    code = run_fake_suite(
+        suites, out, *extra, "--workers", "2", "--backend", "ray", "--episode-timeout", "3"
+    )
     assert code == 1  # the hung episode is an error, kept apart from failures
     rows = _outcomes(out)
     assert [(r[2], r[3], r[6]) for r in rows] == [
@@ -225,28 +212,9 @@ def _recorded(store: Path) -> int:
 @pytest.mark.slow
 def test_driver_killed_mid_sweep_then_rerun_resumes(tmp_path: Path, suites: Path) -> None:
     out = tmp_path / "run"
-    command = [
-        sys.executable,
-        "-m",
-        "awda_bench",
-        "run",
-        "--suite",
-        "fake",
-        "--tasks-dir",
-        str(suites),
-        "--method",
-        f"{FAKES}:SlowPolicy",
-        "--episodes",
-        "6",
-        "--workers",
-        "2",
-        "--backend",
-        "ray",
-        "--no-progress",
-        "--out",
-        str(out),
-    ]
-    env = {**os.environ, "PYTHONPATH": str(TESTS), "AWDA_FAKE_SLEEP_S": "0.1"}
+    extra = ("--episodes", "6", "--workers", "2", "--backend", "ray")
+    command = slow_run_command(suites, out, *extra)
+    env = slow_run_env(0.1)
     proc = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 180
     try:
@@ -270,7 +238,7 @@ def test_without_ray_the_ray_backend_is_refused_with_an_install_hint(
 ) -> None:
     monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError
     out = tmp_path / "run"
-    assert _run(suites, out, "--method", f"{FAKES}:SkillPolicy", "--backend", "ray") == 2
+    assert run_fake_suite(suites, out, "--method", f"{FAKES}:SkillPolicy", "--backend", "ray") == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1
     assert err.startswith("error: --backend ray needs Ray") and "pip install -e '.[ray]'" in err
@@ -288,12 +256,12 @@ def test_bad_backend_options_are_one_line_errors(tmp_path: Path, suites: Path, c
         ),
     ]
     for extra, message in cases:
-        assert _run(suites, out, "--method", f"{FAKES}:SkillPolicy", *extra) == 2
+        assert run_fake_suite(suites, out, "--method", f"{FAKES}:SkillPolicy", *extra) == 2
         err = capsys.readouterr().err
         assert err.startswith("error: ") and err.count("\n") == 1 and message in err, err
     assert not out.exists()
     with pytest.raises(SystemExit):
-        _run(suites, out, "--backend", "dask")
+        run_fake_suite(suites, out, "--backend", "dask")
 
 
 @pytest.mark.slow
@@ -325,31 +293,9 @@ def test_bench_harness_times_ray_beside_local(tmp_path: Path, suites: Path, caps
 
 @pytest.mark.slow
 def test_collect_on_ray_writes_the_same_files_as_local(tmp_path: Path) -> None:
-    args = [
-        "collect",
-        "--suite",
-        "pick_place",
-        "--embodiment",
-        "agent",
-        "--episodes-per-task",
-        "1",
-        "--task",
-        "0",
-        "--synthesize",
-        "1",
-        "--image-size",
-        "64x80",
-        "--no-progress",
-    ]
+    args = tiny_collect_argv(embodiment="agent", episodes_per_task=1)
     assert main([*args, "--out", str(tmp_path / "local"), "--workers", "0"]) == 0
     assert main([*args, "--out", str(tmp_path / "ray"), "--workers", "2", "--backend", "ray"]) == 0
-    digests = [
-        {
-            str(p.relative_to(root)): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(root.rglob("*"))
-            if p.is_file()
-        }
-        for root in (tmp_path / "local", tmp_path / "ray")
-    ]
+    digests = [tree_digest(tmp_path / "local"), tree_digest(tmp_path / "ray")]
     assert "manifest.json" in digests[0] and len(digests[0]) > 2
     assert digests[1] == digests[0]  # frame for frame, byte for byte

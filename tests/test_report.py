@@ -4,12 +4,12 @@ import sqlite3
 from pathlib import Path
 
 import pytest
-from harness_fakes import write_fake_suite, write_snapshots
+from harness_fakes import fake_suites_dir, fake_sweep_config, learned_method, write_snapshots
 
 from awda_bench.errors import UsageError
 from awda_bench.evaluation.methods import MethodSpec, register_method, unregister_method
 from awda_bench.evaluation.results_store import STORE_NAME
-from awda_bench.evaluation.sweep import SweepConfig, run_sweep
+from awda_bench.evaluation.sweep import run_sweep
 from awda_bench.reporting.aggregate import family_key, mean_se
 from awda_bench.reporting.report import write_report
 from awda_bench.reporting.tables import to_latex, to_markdown
@@ -20,30 +20,19 @@ FAKES = "harness_fakes"
 @pytest.fixture(scope="module")
 def run_dir(tmp_path_factory) -> Path:
     root = tmp_path_factory.mktemp("report")
-    suites = root / "tasks"
-    suites.mkdir()
-    write_fake_suite(suites)
+    suites = fake_suites_dir(root / "tasks")
     specs = [
         MethodSpec("fake", f"{FAKES}:SkillPolicy"),
         MethodSpec("raising", f"{FAKES}:RaisingPolicy"),
-        MethodSpec(
-            "learned",
-            f"{FAKES}:SkillPolicy",
-            learned=True,
-            list_snapshots=f"{FAKES}:list_snapshots",
-            load_snapshot=f"{FAKES}:load_snapshot",
-        ),
+        learned_method(),
     ]
     for spec in specs:
         register_method(spec)
     ckpt = write_snapshots(root / "ckpt", [0.1, 0.4, 0.6, 0.9])[0].parent
     out = root / "runs"
-    common = dict(
-        suite="fake", out=out, suites_dir=suites, workers=0, progress=False, command="t", episodes=6
-    )
-    run_sweep(SweepConfig(method="fake", **common))
-    run_sweep(SweepConfig(method="raising", **common))
-    run_sweep(SweepConfig(method="learned", checkpoints=ckpt, snapshots=3, **common))
+    run_sweep(fake_sweep_config(suites, out, "fake", episodes=6))
+    run_sweep(fake_sweep_config(suites, out, "raising", episodes=6))
+    run_sweep(fake_sweep_config(suites, out, "learned", episodes=6, checkpoints=ckpt, snapshots=3))
     for spec in specs:
         unregister_method(spec.name)
     return out
@@ -194,23 +183,10 @@ def test_grasp_waypoint_spread_follows_the_scene_not_a_constant() -> None:
 
 def _fake_sweep(tmp_path: Path, **config: object) -> Path:
     """One ``fake`` sweep of the fake suite into ``tmp_path/runs``; returns that run directory."""
-    suites = tmp_path / "tasks"
-    suites.mkdir()
-    write_fake_suite(suites)
+    suites = fake_suites_dir(tmp_path / "tasks")
     register_method(MethodSpec("fake", f"{FAKES}:SkillPolicy"))
     try:
-        run_sweep(
-            SweepConfig(
-                suite="fake",
-                method="fake",
-                out=tmp_path / "runs",
-                suites_dir=suites,
-                workers=0,
-                progress=False,
-                command="t",
-                **config,  # type: ignore[arg-type]
-            )
-        )
+        run_sweep(fake_sweep_config(suites, tmp_path / "runs", **config))
     finally:
         unregister_method("fake")
     return tmp_path / "runs"

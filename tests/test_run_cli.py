@@ -1,52 +1,37 @@
 import hashlib
-import os
 import signal
 import sqlite3
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
-from harness_fakes import write_snapshots
+from harness_fakes import (
+    fake_suite_argv,
+    learned_method,
+    report_runs,
+    run_fake_suite,
+    slow_run_command,
+    slow_run_env,
+    write_snapshots,
+)
 
 from awda_bench.cli import main
-from awda_bench.evaluation.methods import MethodSpec, register_method, unregister_method
+from awda_bench.evaluation.methods import register_method, unregister_method
 from awda_bench.evaluation.results_store import STORE_NAME
 
-TESTS = Path(__file__).resolve().parent
 FAKES = "harness_fakes"
 
 
 @pytest.fixture
 def learned():
-    register_method(
-        MethodSpec(
-            "learned",
-            f"{FAKES}:SkillPolicy",
-            learned=True,
-            list_snapshots=f"{FAKES}:list_snapshots",
-            load_snapshot=f"{FAKES}:load_snapshot",
-        )
-    )
+    register_method(learned_method())
     yield
     unregister_method("learned")
 
 
 def _run(suites: Path, out: Path, *extra: str) -> int:
-    argv = [
-        "run",
-        "--suite",
-        "fake",
-        "--tasks-dir",
-        str(suites),
-        "--out",
-        str(out),
-        "--no-progress",
-        "--workers",
-        "0",
-    ]
-    return main([*argv, *extra])
+    return run_fake_suite(suites, out, "--workers", "0", *extra)
 
 
 def test_run_then_report_end_to_end(tmp_path: Path, suites: Path, capsys) -> None:
@@ -98,17 +83,7 @@ def test_bad_input_is_one_line_exit_2_and_leaves_the_store_alone(
         (["--method", f"{FAKES}:SkillPolicy", "--seed", "1", "--episodes", "2"], "base_seed=0->1"),
     ]
     for extra, message in cases:
-        argv = [
-            "run",
-            "--suite",
-            "fake",
-            "--tasks-dir",
-            str(suites),
-            "--out",
-            str(out),
-            "--no-progress",
-            *extra,
-        ]
+        argv = fake_suite_argv(suites, out, *extra)
         if "--suite" in extra:
             argv = argv[:1] + argv[3:]
         assert main(argv) == 2, extra
@@ -139,27 +114,9 @@ def _recorded(store: Path) -> int:
 def test_sigkill_mid_sweep_then_resume_equals_an_uninterrupted_run(
     tmp_path: Path, suites: Path
 ) -> None:
-    args = [
-        "--suite",
-        "fake",
-        "--tasks-dir",
-        str(suites),
-        "--method",
-        f"{FAKES}:SlowPolicy",
-        "--episodes",
-        "8",
-        "--workers",
-        "2",
-        "--no-progress",
-    ]
-    env = {
-        **os.environ,
-        "PYTHONPATH": str(TESTS),
-        "AWDA_FAKE_SLEEP_S": "0.1",
-        "OMP_NUM_THREADS": "1",
-    }
+    env = slow_run_env(0.1)
     killed = tmp_path / "killed"
-    command = [sys.executable, "-m", "awda_bench", "run", *args, "--out", str(killed)]
+    command = slow_run_command(suites, killed, "--episodes", "8", "--workers", "2")
     proc = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     store = killed / STORE_NAME
     deadline = time.monotonic() + 120
@@ -175,38 +132,16 @@ def test_sigkill_mid_sweep_then_resume_equals_an_uninterrupted_run(
     assert 4 <= partial < 16
     assert subprocess.run(command, env=env, timeout=300).returncode == 0
     whole = tmp_path / "whole"
-    assert (
-        subprocess.run(
-            [
-                sys.executable,
-                "-m",
-                "awda_bench",
-                "run",
-                *args,
-                "--workers",
-                "1",
-                "--out",
-                str(whole),
-            ],
-            env=env,
-            timeout=300,
-        ).returncode
-        == 0
-    )
+    command = slow_run_command(suites, whole, "--episodes", "8", "--workers", "1")
+    assert subprocess.run(command, env=env, timeout=300).returncode == 0
     assert _outcomes(killed) == _outcomes(whole) and len(_outcomes(whole)) == 16
     db = sqlite3.connect(killed / STORE_NAME)
     assert db.execute(
         "SELECT COUNT(*), COUNT(DISTINCT task || '/' || episode) FROM episodes"
     ).fetchone() == (16, 16)
-    for name in ("killed", "whole"):
-        assert (
-            main(["report", "--runs", str(tmp_path / name), "--out", str(tmp_path / f"rep-{name}")])
-            == 0
-        )
-    assert (tmp_path / "rep-killed" / "s3.md").read_text() == (
-        tmp_path / "rep-whole" / "s3.md"
-    ).read_text()
-    assert "⚠ WARNINGS" not in (tmp_path / "rep-killed" / "report.md").read_text()
+    rep_killed, rep_whole = report_runs(tmp_path, "killed", "whole")
+    assert (rep_killed / "s3.md").read_text() == (rep_whole / "s3.md").read_text()
+    assert "⚠ WARNINGS" not in (rep_killed / "report.md").read_text()
 
 
 def test_num_waypoints_selects_the_gt_waypoints_variant(tmp_path: Path, capsys) -> None:

@@ -16,14 +16,13 @@ from typing import Any
 
 import numpy as np
 import pytest
-from harness_fakes import SkillPolicy, write_snapshots
+from harness_fakes import SkillPolicy, fake_sweep_config, learned_method, write_snapshots
 
 from awda_bench.cli import main
 from awda_bench.commands.serve import build_server
 from awda_bench.episode import EpisodeContext, EpisodeSpec, Proprioception, WristDepth
 from awda_bench.errors import RemotePolicyError, UsageError
 from awda_bench.evaluation.methods import (
-    MethodSpec,
     get_method,
     register_method,
     select_snapshots,
@@ -38,13 +37,7 @@ from awda_bench.serving.remote_policy import RemotePolicy, ServedMethod
 from awda_bench.serving.server import PolicyServer
 
 TESTS = Path(__file__).resolve().parent
-LEARNED = MethodSpec(
-    "served-learned",
-    "harness_fakes:SkillPolicy",
-    learned=True,
-    list_snapshots="harness_fakes:list_snapshots",
-    load_snapshot="harness_fakes:load_snapshot",
-)
+LEARNED = learned_method("served-learned")
 
 
 @pytest.fixture(autouse=True)
@@ -72,17 +65,7 @@ def _served(make: Any, method: str) -> PolicyServer:
 
 
 def _sweep(suites: Path, out: Path, method: str, **kw: Any):
-    config = SweepConfig(
-        suite="fake",
-        out=out,
-        suites_dir=suites,
-        progress=False,
-        command="test",
-        method=method,
-        workers=0,
-        **kw,
-    )
-    return run_sweep(config)
+    return run_sweep(fake_sweep_config(suites, out, method, **kw))
 
 
 def _rows(out: Path) -> list[tuple]:

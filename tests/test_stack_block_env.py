@@ -3,14 +3,13 @@ every env keeps is in ``test_env_contract.py``."""
 
 from __future__ import annotations
 
-import gymnasium as gym
 import numpy as np
 import pytest
 import torch
+from task_env_helpers import assert_spread_out, run_expert, task_env_fixture
 
 from awda_bench.envs.stack_block import STACK_ORDERS, StackBlockLayout
-from awda_bench.episode import EpisodeContext, EpisodeSpec
-from awda_bench.experts.stack_block import StackBlockExpert, StackBlockExpertConfig
+from awda_bench.experts.stack_block import StackBlockExpert
 
 # ---------------------------------------------------------------------------- fast
 
@@ -25,23 +24,10 @@ def test_six_ordered_pairs_of_three_distinct_cubes() -> None:
     assert max(c.footprint_radius_m for c in cubes) * 2 < 0.08
 
 
-def test_expert_config_validates() -> None:
-    with pytest.raises(ValueError, match="carry_xy_tolerance_m"):
-        StackBlockExpertConfig(carry_xy_tolerance_m=0.0)
-    with pytest.raises(ValueError, match="release_steps"):
-        StackBlockExpertConfig(release_steps=0)
-
-
 # ---------------------------------------------------------------------------- slow (simulation)
 
 
-@pytest.fixture(scope="module")
-def env():
-    import awda_bench.envs  # noqa: F401
-
-    e = gym.make("AWDA-StackBlock-v1", obs_mode="state", reward_mode="none", num_envs=1)
-    yield e
-    e.close()
+env = task_env_fixture("AWDA-StackBlock-v1")
 
 
 def _cube_state(env) -> np.ndarray:
@@ -54,19 +40,6 @@ def _place(cube, xyz) -> None:
 
     cube.set_pose(Pose.create_from_pq(torch.tensor([xyz], dtype=torch.float32)))
     cube.set_linear_velocity(torch.zeros((1, 3)))
-
-
-@pytest.mark.slow
-def test_make_reset_step(env) -> None:
-    base = env.unwrapped
-    assert base.robot_uids == "panda_awda" and base.family == "stack_block"
-    assert base.num_variations == 6 and base.has_grasp_target
-    obs, info = env.reset(seed=0, options={"task": 3})
-    assert torch.isfinite(obs).all()
-    assert (int(base.cube_a[0]), int(base.cube_b[0])) == STACK_ORDERS[3]
-    obs, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
-    assert torch.isfinite(obs).all() and not bool(info["success"][0])
-    assert set(info) >= {"success", "success_once", "reached", "grasped", "is_grasped"}
 
 
 @pytest.mark.slow
@@ -84,9 +57,7 @@ def test_same_seed_same_layout_and_layouts_respect_the_rules(env) -> None:
     for seed in range(8):
         env.reset(seed=seed)
         xy = env.unwrapped.cube_poses()[0][0, :, :2].cpu().numpy()
-        d = np.linalg.norm(xy[:, None] - xy[None], axis=-1) + np.eye(3)
-        assert d.min() >= lay.min_separation_m - 1e-6
-        assert (np.abs(xy - center) <= np.array(lay.spawn_half_size_m) + 1e-6).all()
+        assert_spread_out(xy, center, lay.spawn_half_size_m, lay.min_separation_m)
         hidden = (xy[:, 0] > x_lo) & (xy[:, 0] < x_hi) & (xy[:, 1] > y_lo) & (xy[:, 1] < y_hi)
         assert not hidden.any()
 
@@ -120,19 +91,9 @@ def test_success_needs_a_resting_on_b_not_on_c_not_above(env) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize(("task", "seed"), [(0, 0), (5, 2)])
 def test_expert_stacks_with_the_agent(env, task: int, seed: int) -> None:
-    base = env.unwrapped
-    obs, _ = env.reset(seed=seed, options={"task": task})
-    expert = StackBlockExpert()
-    spec = EpisodeSpec(suite="mosaic", task=task, episode=0, seed=seed, demo_seed=seed)
-    expert.reset(EpisodeContext(env=base, spec=spec))
-    grasped_steps = 0
-    for _ in range(220):
-        obs, _, _, _, info = env.step(expert.act(obs))
-        grasped_steps += bool(base.truth_signals()["grasp"][0])
-        if expert.done:
-            break
+    run = run_expert(env, StackBlockExpert(), task, seed, horizon=220)
     for _ in range(5):
-        obs, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
-    assert expert.done and bool(info["success"][0])
+        _, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+    assert run.done and bool(info["success"][0])
     assert bool(info["reached"][0]) and bool(info["grasped"][0])
-    assert grasped_steps > 10
+    assert run.signals["grasp"] > 10

@@ -12,14 +12,13 @@
 from __future__ import annotations
 
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from test_collect import tiny_collection_dir
 from test_tosvi_policy import _Frames, _small
+from training_helpers import FROZEN_LITE0, TINY_NET, CountingEncoder, recipe_toml
 
 from awda_bench.cli import main
 from awda_bench.data.datasets import AwdaPairDataset, CollectedData, TosviDataset
@@ -232,46 +231,24 @@ def test_policy_encodes_each_frame_once_and_acts_as_the_whole_stack_re_encoded(
 
 
 # ----------------------------------------------------------------------------- tiny collection
-@pytest.fixture(scope="module")
-def tiny(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return tiny_collection_dir(tmp_path_factory)
-
-
-FROZEN_TOSVI_RECIPE = """
-name = "tiny-tosvi-frozen"
-suites = ["pick_place", "mosaic"]
-[model]
-image_height_px = 64
-image_width_px = 80
-attention_layers = 1
-attention_heads = 2
-attention_head_dim = 16
-hidden_dim = 32
-feature_dim = 32
-head_hidden_dim = 32
-frame_stack = 3
-backbone = "efficientnet-lite0"
-backbone_stride = 16
-freeze_backbone = true
-backbone_weights = "imagenet"
-tosvi_feature_pool = 2
-[train]
-batch_size = 2
-max_steps = 6
-snapshot_every_steps = 2
-validate_every_steps = 5
-validation_batches = 1
-[augment]
-shift_px = 0
-"""
+FROZEN_TOSVI_RECIPE = recipe_toml(
+    "tiny-tosvi-frozen",
+    {
+        **TINY_NET,
+        "hidden_dim": 32,
+        "feature_dim": 32,
+        "frame_stack": 3,
+        **FROZEN_LITE0,
+        "tosvi_feature_pool": 2,
+    },
+)
 
 
 @pytest.mark.slow
 def test_tosvi_trains_from_the_cache_resumes_the_identical_curve_and_rebuilds_its_trunk(
-    tiny: Path, tmp_path: Path
+    tiny_copy: Path, tmp_path: Path
 ) -> None:
-    data_dir = tmp_path / "data"
-    shutil.copytree(tiny, data_dir)
+    data_dir = tiny_copy
     recipe = tmp_path / "frozen.toml"
     recipe.write_text(FROZEN_TOSVI_RECIPE)
     common = ["--data", str(data_dir), "--recipe", str(recipe), "--no-progress", "--threads", "1"]
@@ -353,24 +330,11 @@ def test_tosvi_trains_from_the_cache_resumes_the_identical_curve_and_rebuilds_it
     assert steps == [0, 2] and np.all(np.isfinite(losses))
 
 
-class CountingEncoder:
-    def __init__(self) -> None:
-        self.frames = 0
-        torch.manual_seed(0)
-        self.conv = torch.nn.Conv2d(3, 4, kernel_size=16, stride=16)
-
-    def __call__(self, images: torch.Tensor) -> torch.Tensor:
-        self.frames += len(images)
-        with torch.no_grad():
-            return self.conv(images)
-
-
 @pytest.mark.slow
 def test_awda_and_tosvi_share_an_unpooled_cache_without_evicting_each_other(
-    tiny: Path, tmp_path: Path
+    tiny_copy: Path,
 ) -> None:
-    data_dir = tmp_path / "data"
-    shutil.copytree(tiny, data_dir)
+    data_dir = tiny_copy
     data = CollectedData(data_dir)
     trunk = _trunk()
     pairs = AwdaPairDataset(data, image_size=(H, W))

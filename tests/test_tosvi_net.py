@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 from torch.utils.data import default_collate
+from training_helpers import fit_batch
 
 from awda_bench.errors import UsageError
 from awda_bench.models.config import TosviConfig, TrunkConfig
@@ -97,14 +98,7 @@ def test_overfits_a_tiny_batch_of_actions() -> None:
     model = TosviNet(_config(action_bins=32))
     data = SyntheticActionDataset(2, height_px=64, width_px=64, demo_frames=1, frame_stack=2)
     batch = default_collate([data[i] for i in range(2)])
-    optimizer = torch.optim.Adam(model.parameters(), lr=5e-4)
-    losses = []
-    for _ in range(250):
-        loss, info = model.compute_loss(batch)
-        optimizer.zero_grad()
-        loss.backward()
-        optimizer.step()
-        losses.append(info["loss"])
+    losses = fit_batch(model, batch)
     assert min(losses[-5:]) <= 0.1 * losses[0], (losses[0], losses[-5:])
     with torch.no_grad():  # training mode: the fit itself
         policy, _ = model(batch["demo"], batch["frames"])

@@ -1,9 +1,9 @@
 from pathlib import Path
 
 import cv2
-from harness_fakes import write_fake_suite
+from harness_fakes import fake_suites_dir, fake_sweep_config
 
-from awda_bench.evaluation.sweep import SweepConfig, run_sweep
+from awda_bench.evaluation.sweep import run_sweep
 from awda_bench.reporting.videos import choose_episodes, record_videos
 
 
@@ -19,19 +19,8 @@ def test_choose_first_k_successes_and_failures_per_task() -> None:
 
 
 def test_videos_replay_the_recorded_episodes(tmp_path: Path) -> None:
-    suites = tmp_path / "tasks"
-    suites.mkdir()
-    write_fake_suite(suites)
-    config = SweepConfig(
-        suite="fake",
-        method="harness_fakes:SkillPolicy",
-        out=tmp_path / "runs",
-        suites_dir=suites,
-        workers=0,
-        progress=False,
-        episodes=4,
-        command="t",
-    )
+    suites = fake_suites_dir(tmp_path / "tasks")
+    config = fake_sweep_config(suites, tmp_path / "runs", "harness_fakes:SkillPolicy", episodes=4)
     run_sweep(config)
     files = record_videos(config, 1, demo_source=None)
     videos = sorted(p.name for p in files if p.suffix == ".mp4")

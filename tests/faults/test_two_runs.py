@@ -4,28 +4,22 @@ episode is in the store once, with one attempt, and the report is the same as on
 
 from __future__ import annotations
 
-import os
 import sqlite3
 import subprocess
-import sys
 from pathlib import Path
 
-from awda_bench.cli import main
-from awda_bench.evaluation.results_store import STORE_NAME
+from harness_fakes import report_runs, slow_run_command, slow_run_env
 
-TESTS = Path(__file__).resolve().parent.parent
+from awda_bench.evaluation.results_store import STORE_NAME
 
 
 def test_two_runs_at_once_into_one_store_record_every_episode_once(
     tmp_path: Path, suites: Path
 ) -> None:
-    env = {**os.environ, "PYTHONPATH": str(TESTS), "AWDA_FAKE_SLEEP_S": "0.01",
-           "OMP_NUM_THREADS": "1"}  # fmt: skip
+    env = slow_run_env(0.01)
 
     def command(out: Path) -> list[str]:
-        return [sys.executable, "-m", "awda_bench", "run", "--suite", "fake", "--tasks-dir",
-                str(suites), "--method", "harness_fakes:SlowPolicy", "--episodes", "6",
-                "--workers", "1", "--no-progress", "--out", str(out)]  # fmt: skip
+        return slow_run_command(suites, out, "--episodes", "6", "--workers", "1")
 
     shared = tmp_path / "shared"
     both = [subprocess.Popen(command(shared), env=env, stderr=subprocess.PIPE, text=True)
@@ -39,12 +33,6 @@ def test_two_runs_at_once_into_one_store_record_every_episode_once(
     assert all(status == "ok" and attempts == 1 for _, _, status, attempts in rows)
     alone = tmp_path / "alone"
     assert subprocess.run(command(alone), env=env, timeout=300).returncode == 0
-    for name in ("shared", "alone"):
-        assert (
-            main(["report", "--runs", str(tmp_path / name), "--out", str(tmp_path / f"r-{name}")])
-            == 0
-        )
-    assert (tmp_path / "r-shared" / "s3.md").read_text() == (
-        tmp_path / "r-alone" / "s3.md"
-    ).read_text()
-    assert "⚠ WARNINGS" not in (tmp_path / "r-shared" / "report.md").read_text()
+    rep_shared, rep_alone = report_runs(tmp_path, "shared", "alone")
+    assert (rep_shared / "s3.md").read_text() == (rep_alone / "s3.md").read_text()
+    assert "⚠ WARNINGS" not in (rep_shared / "report.md").read_text()
