@@ -16,4 +16,5 @@ COMMANDS: tuple[str, ...] = (
     "replay",
     "train",
     "reproduce",
+    "study",
 )

@@ -5,8 +5,8 @@ Soft-DTW on the waypoints alone did not teach the head *which* object the demo s
 transfers to an unseen (object, compartment) pairing (``reports/learned/recipe-study.md``,
 sessions 10-11): it fitted the training pairs and stayed at chance on the held-out tasks. Supervised
 directly, the same frozen features identify the object in held-out pairs at 0.96-0.99 within 300
-steps (``scripts/screening/identify.py``). The labels come from the recorded trajectories, as the
-waypoints do; no simulator state::
+steps (``scripts/screening/identify.py``, in git history at 5c8c53b). The labels come from the
+recorded trajectories, as the waypoints do; no simulator state::
 
     demo cell   where the demonstrator's TCP is at its first grasp, projected through the scene
                 camera (the pair's, which agent and demonstrator share) onto the demo's first

@@ -1,0 +1,178 @@
+"""Offline screening of an AWDA snapshot: its waypoints on collected pairs against the
+ground-truth waypoints of the agent's own trajectory (the recipe studies' offline measure,
+``reports/learned/recipe-study*.md``; not the evaluation protocol, which plays episodes).
+
+For every (agent, demonstrator) pair of each task in a collection (a ``test`` split: the held-out
+tasks' validation episodes; a ``train`` split: e.g. the held-out tasks' training siblings), the
+snapshot's largest waypoint set against the gt-waypoints rule's K = 5 waypoints of the agent's
+trajectory (:func:`awda_bench.waypoints.extract_waypoints`), per task::
+
+    wp_err_cm        median over pairs of the mean distance between predicted and true waypoint i
+    end_err_cm       median of the last predicted waypoint's distance to the trajectory's last TCP
+    grasp_pred       fraction of pairs whose prediction has a grasp (probability > 0.5)
+    grasp_true       fraction whose trajectory grasps
+    grasp_err_cm     grasping tasks: median distance of the first grasp-attributed predicted
+                     waypoint to the TCP at the first mined grasp step
+    spread_pred_cm   mean distance of a pair's predicted waypoints to the task's mean prediction;
+    spread_true_cm   the same of the true waypoints (a network that reads the scene spreads about
+                     as much as the truth)
+    object_near      ``demo-pointer`` snapshots: fraction of pairs whose object softmax over o_1
+    moved_near       (and what-moved softmax over the demo) peaks within one cell (Chebyshev) of
+                     the identification label: the first grasp, or where the hand first moves the
+                     object on a task without one (:mod:`awda_bench.data.contact_point`)
+
+Frozen-trunk snapshots only (the features come from the collection's feature cache, built if
+missing).
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import torch
+
+from awda_bench.data.datasets import AwdaPairDataset, CollectedData, Selection
+from awda_bench.errors import UsageError
+from awda_bench.models.awda_net import AwdaNet
+from awda_bench.models.identification_loss import grasp_cells_per_camera
+from awda_bench.models.snapshot import load_snapshot
+from awda_bench.training.feature_cache import load_or_build
+from awda_bench.training.feature_datasets import CachedAwdaPairs, frames_needed
+from awda_bench.waypoints import extract_waypoints
+
+BATCH = 64
+"""Pairs per forward pass."""
+
+
+def _near_label(model: AwdaNet, batch: dict[str, torch.Tensor], n: int) -> dict[str, list[float]]:
+    """Per pair, whether the pointer's object / what-moved softmax peaks within one cell of its
+    identification label (NaN without a label or without a pointer)."""
+    near = {"object_near": [np.nan] * n, "moved_near": [np.nan] * n}
+    pointer = getattr(model.scene_head, "pointer", None)
+    if pointer is None:
+        return near
+    camera = model.camera_indices(batch.get("camera"), n)
+    demo, first = model.cached_maps(batch["demo_features"], batch["first_frame_features"])
+    out = pointer(demo, first, torch.zeros_like(batch["head"]), camera)
+    width = model.grid[1]
+    for key, logits, trajectory, contact in (
+        ("object_near", out.object_logits, batch["trajectory"], batch["contact"]),
+        ("moved_near", out.moved_logits, batch["demo_trajectory"], batch["demo_contact"]),
+    ):
+        cells, ok = grasp_cells_per_camera(
+            trajectory, model.ray_cameras, camera, model.grid, contact
+        )
+        for j, (want, got) in enumerate(
+            zip(cells.tolist(), logits.argmax(1).tolist(), strict=True)
+        ):
+            if ok[j]:
+                apart = max(abs(want // width - got // width), abs(want % width - got % width))
+                near[key][j] = float(apart <= 1)
+    return near
+
+
+def pair_rows(
+    snapshot: Path, data_dir: Path, tasks: Sequence[int] = (), threads: int | None = None
+) -> list[dict[str, Any]]:
+    """One row per pair: task, predicted and true waypoints, and the measures above."""
+    if threads is not None:
+        torch.set_num_threads(threads)
+    loaded = load_snapshot(snapshot)
+    model = loaded.build_model("cpu").eval()
+    if not isinstance(model, AwdaNet):
+        raise UsageError(
+            f"{snapshot} holds a {loaded.arch!r} model; the offline study reads AWDA snapshots"
+        )
+    trunk = model.config.trunk
+    if not trunk.freeze_backbone:
+        raise UsageError(
+            f"{snapshot} fine-tunes its backbone; the offline study reads frozen-trunk snapshots"
+        )
+    data = CollectedData(data_dir)
+    pairs = AwdaPairDataset(
+        data, image_size=(trunk.image_height_px, trunk.image_width_px), include_synthesized=False,
+        allow_test=True, selection=Selection(tasks=tuple(tasks) or None), contact_points=True,
+    )  # fmt: skip
+    if len(pairs) == 0:
+        raise UsageError(
+            f"{data_dir} holds no (agent, demonstrator) pairs of tasks {list(tasks) or 'any'}"
+        )
+    samples = CachedAwdaPairs(
+        pairs, load_or_build(data, trunk, frames_needed(pairs), progress=False)
+    )
+    rows: list[dict[str, Any]] = []
+    with torch.no_grad():
+        for start in range(0, len(samples), BATCH):
+            chunk = range(start, min(len(samples), start + BATCH))
+            batch = torch.utils.data.default_collate([samples[i] for i in chunk])
+            raw = model.forward_features(
+                batch["demo_features"], batch["first_frame_features"],
+                torch.zeros(len(chunk), dtype=torch.int64), batch.get("camera"),
+            )  # fmt: skip
+            largest = model.waypoint_sets(raw)[-1].numpy()
+            near = _near_label(model, batch, len(chunk))
+            for n, (i, predicted) in enumerate(zip(chunk, largest, strict=True)):
+                agent = pairs.pairs[i][0]
+                grasp = data.attributes(agent, ("grasp",))[:, 0] > 0.5
+                tcp = data.tcp_pos(agent)
+                true = extract_waypoints(tcp[:-1], grasp, K=5)[:, :3]
+                flags = 1 / (1 + np.exp(-predicted[:, 3])) > 0.5
+                first_grasp = np.flatnonzero(grasp)
+                grasp_err = np.nan
+                if first_grasp.size and flags.any():
+                    at = predicted[np.flatnonzero(flags)[0], :3]
+                    grasp_err = float(np.linalg.norm(at - tcp[first_grasp[0]]) * 100)
+                rows.append({
+                    "task": agent.task,
+                    "task_name": agent.meta.get("task_name", str(agent.task)),
+                    "wp_err_cm": float(np.linalg.norm(predicted[:, :3] - true, axis=1).mean() * 100),
+                    "end_err_cm": float(np.linalg.norm(predicted[-1, :3] - tcp[-1]) * 100),
+                    "grasp_pred": bool(flags.any()),
+                    "grasp_true": bool(first_grasp.size),
+                    "grasp_err_cm": grasp_err,
+                    "object_near": near["object_near"][n],
+                    "moved_near": near["moved_near"][n],
+                    "predicted": predicted[:, :3],
+                    "true": true,
+                })  # fmt: skip
+    return rows
+
+
+def _spread(points: list[np.ndarray]) -> float:
+    stack = np.stack(points)
+    return float(np.linalg.norm(stack - stack.mean(0), axis=-1).mean() * 100)
+
+
+def per_task_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
+    """The per-task measures (module docstring), one row per task, plus ``all`` (medians over
+    every pair's waypoint and end errors)."""
+    by_task: dict[int, list[dict[str, Any]]] = defaultdict(list)
+    for row in rows:
+        by_task[row["task"]].append(row)
+    table = []
+    for _, group in sorted(by_task.items()):
+        frame = pd.DataFrame(group)
+        table.append({
+            "task": group[0]["task_name"],
+            "pairs": len(group),
+            "wp_err_cm": frame["wp_err_cm"].median(),
+            "end_err_cm": frame["end_err_cm"].median(),
+            "grasp_pred": frame["grasp_pred"].mean(),
+            "grasp_true": frame["grasp_true"].mean(),
+            "grasp_err_cm": frame["grasp_err_cm"].median(),
+            "spread_pred_cm": _spread([r["predicted"] for r in group]),
+            "spread_true_cm": _spread([r["true"] for r in group]),
+            "object_near": frame["object_near"].mean(),
+            "moved_near": frame["moved_near"].mean(),
+        })  # fmt: skip
+    every = pd.DataFrame(rows)
+    table.append({
+        "task": "all", "pairs": len(rows), "wp_err_cm": every["wp_err_cm"].median(),
+        "end_err_cm": every["end_err_cm"].median(),
+    })  # fmt: skip
+    return pd.DataFrame(table).set_index("task")

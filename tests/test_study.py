@@ -1,0 +1,55 @@
+"""``study offline``: a trained snapshot's waypoints against the ground truth on collected pairs,
+per task, and a one-line refusal of what it cannot read."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from training_helpers import FROZEN_LITE0, TINY_NET, recipe_toml
+
+from awda_bench.cli import main
+from awda_bench.data.datasets import AwdaPairDataset, CollectedData
+from awda_bench.models.snapshot import list_snapshots
+
+POINTER = {**TINY_NET, **FROZEN_LITE0, "head": "demo-pointer", "identification_weight": 1.0}
+
+
+@pytest.mark.slow
+def test_study_offline_measures_every_pair_per_task(
+    tiny_copy: Path, tmp_path: Path, capsys
+) -> None:
+    recipe = tmp_path / "pointer.toml"
+    recipe.write_text(recipe_toml("tiny-pointer", POINTER))
+    out = tmp_path / "ckpt"
+    argv = ["train", "--method", "awda", "--data", str(tiny_copy), "--recipe", str(recipe)]
+    assert main([*argv, "--steps", "2", "--no-progress", "--threads", "1", "--out", str(out)]) == 0
+    snapshot = list_snapshots(out)[-1]
+    capsys.readouterr()
+    csv = tmp_path / "study" / "offline.csv"
+    assert main(["study", "offline", str(snapshot), str(tiny_copy), "--csv", str(csv)]) == 0
+    lines = csv.read_text().splitlines()
+    header = lines[0].split(",")
+    assert header[:4] == ["task", "pairs", "wp_err_cm", "end_err_cm"] and "object_near" in header
+    data = CollectedData(tiny_copy)
+    pairs = AwdaPairDataset(data, include_synthesized=False, image_size=(64, 80))
+    tasks = {ref.task for ref, _, _ in pairs.pairs}
+    rows = {line.split(",")[0]: line.split(",") for line in lines[1:]}
+    assert len(rows) == len(tasks) + 1 and rows["all"][1] == str(len(pairs))
+    assert all(float(row[2]) > 0.0 for row in rows.values())  # cm, every task and over all
+    assert "wp_err_cm" in capsys.readouterr().out
+    # only these tasks
+    one = min(tasks)
+    argv = ["study", "offline", str(snapshot), str(tiny_copy), "--task", str(one)]
+    assert main([*argv, "--csv", str(csv)]) == 0
+    only = [line.split(",") for line in csv.read_text().splitlines()[1:]]
+    assert len(only) == 2 and only[0][0] in rows and only[1][0] == "all"
+    assert only[0] == rows[only[0][0]] or only[0][1] == only[1][1]  # that task's pairs alone
+
+
+def test_study_offline_refuses_what_it_cannot_read(tmp_path: Path, capsys) -> None:
+    missing = tmp_path / "snapshot-000000001.pt"
+    missing.write_bytes(b"not a snapshot")
+    assert main(["study", "offline", str(missing), str(tmp_path)]) != 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:")
