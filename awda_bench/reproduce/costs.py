@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 
 @dataclass(frozen=True)
@@ -59,6 +59,30 @@ class Costs:
 
 
 COSTS = Costs()
+
+
+SUITE_COSTS: dict[str, dict[str, object]] = {
+    "metaworld": {
+        # 2,250 training episodes (900 + 900 + 450 synthesized) in 48.8 min with 2 workers
+        # (learned/metaworld-small/): 1.30 s each
+        "collect_episode_s": 1.30,
+        # awda: 1000 episodes in 8.5 min with 2 workers on the idle machine (metaworld-small/);
+        # tosvi: 500-step episodes, 26.8-28.9 s each with one worker beside another benchmark
+        # (docs/metaworld.md), 33-48 s with two workers beside the test suite (session 34)
+        "eval_episode_s": {"awda": 1.0, "tosvi": 30.0, "tosvi-depth": 50.0},
+        # T-OSVI over 7x7 pooled maps (224x224 frames): 0.50 s a step (10th percentile; median
+        # 0.71) with one thread on the shared machine, session 34's full-protocol run
+        "frozen_tosvi_step_s": {"tosvi": 0.5, "tosvi-depth": 2.0},
+    },
+}
+"""Per-suite figures that differ from pick-and-place's (the defaults above): Meta-World's frames
+are smaller and its episodes longer. ``metaworld_ml45`` shares Meta-World's."""
+
+
+def costs_for(suite: str) -> Costs:
+    """The cost figures of ``suite`` (:data:`SUITE_COSTS` over :data:`COSTS`)."""
+    found = SUITE_COSTS.get("metaworld" if suite.startswith("metaworld") else suite)
+    return COSTS if found is None else replace(COSTS, **found)  # type: ignore[arg-type]
 
 
 def clock(seconds: float) -> str:

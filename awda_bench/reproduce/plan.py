@@ -25,7 +25,7 @@ from awda_bench.reproduce.config import (
     fit_check_tasks,
     train_data,
 )
-from awda_bench.reproduce.costs import COSTS, clock
+from awda_bench.reproduce.costs import clock, costs_for
 
 if TYPE_CHECKING:
     from awda_bench.suites import Suite
@@ -228,14 +228,14 @@ def _eval_tasks(suite: Suite, hold_out: str | None) -> tuple[list[int], int]:
 def _collect_stage(name: str, collect: CollectConfig, total: int, noun: str, done: bool) -> Stage:
     """``collect NAME``: ``collect``'s command, ``total`` episodes, the ones still to record timed."""
     left = _collect_remaining(collect)
-    estimate = left * COSTS.collect_episode_s * 2 / collect.workers
+    estimate = left * costs_for(collect.suite).collect_episode_s * 2 / collect.workers
     detail = f"{total} {noun}" + (f", {left} left" if 0 < left < total else "")
     return Stage(name, _collect_argv(collect), estimate, done, detail, collect)
 
 
 def _eval_stage(key: str, evaluate: SweepConfig, left: int, arch: str, detail: str) -> Stage:
     """``evaluate KEY``: ``evaluate``'s ``run`` command, ``left`` episodes to play (done at 0)."""
-    estimate = left * COSTS.eval_episode_s[arch] / evaluate.workers
+    estimate = left * costs_for(evaluate.suite).eval_episode_s[arch] / evaluate.workers
     return Stage(f"evaluate {key}", _run_argv(evaluate), estimate, left == 0, detail, evaluate)
 
 
@@ -358,34 +358,35 @@ def _train_costs(plan: _Plan, key: str, planned_caches: set[str]) -> tuple[float
     it needs that neither exist nor an earlier column of this plan encodes (added to
     ``planned_caches``)."""
     column = COLUMN_KEYS[key]
-    factor = COSTS.paper_step_factor if plan.config.recipe == "paper" else 1.0
-    step_s, encode_s = COSTS.train_step_s[column.arch] * factor, 0.0
+    costs = costs_for(plan.config.suite)
+    factor = costs.paper_step_factor if plan.config.recipe == "paper" else 1.0
+    step_s, encode_s = costs.train_step_s[column.arch] * factor, 0.0
     frozen = plan.recipe.model.trunk.freeze_backbone
     pairs = (plan.n_train - plan.synthesize) / 2
     # frames to encode into the cache: (part, frames), the synthesized episodes' own part
     parts: list[tuple[str, float]] = []
     cache_kind = "awda" if column.arch == "awda" else "tosvi"  # T-OSVI-style nets share one
     if frozen and column.arch == "awda":  # cached features; the cache is encoded once
-        step_s = COSTS.frozen_step_s
+        step_s = costs.frozen_step_s
         # o_1 of every agent episode, the demo frames of every demonstrator and synthesized one
         parts = [(cache_kind, pairs * 11), (f"{cache_kind}+synthesized", plan.synthesize * 10)]
     elif frozen:  # T-OSVI over cached (pooled) maps: every agent frame is encoded once
         from awda_bench.training.run import frame_stack_of
 
         one_frame = frame_stack_of(plan.recipe, column) == 1
-        step_s = COSTS.frozen_tosvi_one_frame_step_s if one_frame else (
-            COSTS.frozen_tosvi_step_s[column.arch]
+        step_s = costs.frozen_tosvi_one_frame_step_s if one_frame else (
+            costs.frozen_tosvi_step_s[column.arch]
         )  # fmt: skip
         parts = [
-            (cache_kind, pairs * (COSTS.agent_episode_steps + 10)),
-            (f"{cache_kind}+synthesized", plan.synthesize * COSTS.synthesized_episode_frames),
+            (cache_kind, pairs * (costs.agent_episode_steps + 10)),
+            (f"{cache_kind}+synthesized", plan.synthesize * costs.synthesized_episode_frames),
         ]
     if not column.synthesized:
         parts = parts[:1]
     for part, frames in parts:
         built = _cache_built(plan.data, plan.recipe, column.arch, synthesized=part != cache_kind)
         if part not in planned_caches and not built:
-            encode_s += COSTS.encode_frame_s * frames
+            encode_s += costs.encode_frame_s * frames
         planned_caches.add(part)
     return step_s, encode_s
 
@@ -442,7 +443,7 @@ def _fit_check_stage(plan: _Plan, key: str, evaluate: SweepConfig, trained: bool
         f"evaluate {key} on training tasks",
         _run_argv(fit),
         (n_fit if remaining is None else remaining)
-        * COSTS.eval_episode_s[COLUMN_KEYS[key].arch]
+        * costs_for(plan.config.suite).eval_episode_s[COLUMN_KEYS[key].arch]
         / plan.config.workers,
         remaining == 0,
         f"tasks {', '.join(map(str, train_tasks))}: did it fit?",
