@@ -21,6 +21,33 @@ E = np.array(
 )
 
 
+CAMERA = {
+    "camera_intrinsic": tuple(K.ravel()),
+    "camera_extrinsic": tuple(E.ravel()),
+    "camera_size": (240, 320),
+}
+"""AwdaConfig's camera fields of the test camera."""
+POINTER_TRUNK = TrunkConfig(
+    backbone="efficientnet-lite0", backbone_stride=16, freeze_backbone=True,
+    head="demo-pointer", attention_head_dim=8,
+)  # fmt: skip
+
+
+def _grasping_batch() -> dict[str, torch.Tensor]:
+    """Two cached-feature rows whose trajectories grasp from point 4 on (seeded)."""
+    torch.manual_seed(0)
+    trajectory = torch.zeros(2, 10, 4)
+    trajectory[:, :, :3] = torch.tensor([-0.1, 0.05, 0.02])
+    trajectory[:, 4:, 3] = 1.0
+    return {
+        "demo_features": torch.randn(2, 10, 112, 15, 20),
+        "first_frame_features": torch.randn(2, 112, 15, 20),
+        "trajectory": trajectory,
+        "demo_trajectory": trajectory,
+        "head": torch.zeros(2, dtype=torch.long),
+    }
+
+
 def _shape(grid: tuple[int, int], frames: int) -> CellHeadShape:
     return CellHeadShape(
         channels=8, grid=grid, demo_frames=frames, dim=16, dropout=0.0, hidden=32,
@@ -155,32 +182,14 @@ def test_a_row_without_a_grasp_takes_its_contact_point() -> None:
 
 
 def test_identification_weight_needs_the_pointer_and_a_camera() -> None:
-    camera = {
-        "camera_intrinsic": tuple(K.ravel()),
-        "camera_extrinsic": tuple(E.ravel()),
-        "camera_size": (240, 320),
-    }
-    pointer = TrunkConfig(
-        backbone="efficientnet-lite0", backbone_stride=16, freeze_backbone=True,
-        head="demo-pointer", attention_head_dim=8,
-    )  # fmt: skip
+    camera, pointer = CAMERA, POINTER_TRUNK
     with pytest.raises(UsageError, match="identification_weight"):
         AwdaConfig(trunk=pointer, identification_weight=1.0)  # no camera
     with pytest.raises(UsageError, match="identification_weight"):
         AwdaConfig(trunk=TrunkConfig(head="demo-to-scene"), identification_weight=1.0, **camera)
     config = AwdaConfig(trunk=pointer, identification_weight=1.0, **camera)
     model = AwdaNet(config, load_backbone_weights=False)
-    torch.manual_seed(0)
-    trajectory = torch.zeros(2, 10, 4)
-    trajectory[:, :, :3] = torch.tensor([-0.1, 0.05, 0.02])
-    trajectory[:, 4:, 3] = 1.0
-    batch = {
-        "demo_features": torch.randn(2, 10, 112, 15, 20),
-        "first_frame_features": torch.randn(2, 112, 15, 20),
-        "trajectory": trajectory,
-        "demo_trajectory": trajectory,
-        "head": torch.zeros(2, dtype=torch.long),
-    }
+    batch = _grasping_batch()
     loss, info = model.compute_loss(batch)
     assert info["id_rows"] == 1.0 and info["id_moved"] > 0 and info["id_object"] > 0
     loss.backward()
@@ -236,30 +245,12 @@ def test_the_hand_path_moves_the_demo_hands_path_onto_o1s_object() -> None:
 
 
 def test_the_hand_path_trains_with_the_identification_loss() -> None:
-    camera = {
-        "camera_intrinsic": tuple(K.ravel()),
-        "camera_extrinsic": tuple(E.ravel()),
-        "camera_size": (240, 320),
-    }
-    pointer = TrunkConfig(
-        backbone="efficientnet-lite0", backbone_stride=16, freeze_backbone=True,
-        head="demo-pointer", attention_head_dim=8,
-    )  # fmt: skip
+    camera, pointer = CAMERA, POINTER_TRUNK
     with pytest.raises(UsageError, match="demo_hand_path"):
         AwdaConfig(trunk=pointer, demo_hand_path=True, **camera)  # no identification loss
     config = AwdaConfig(trunk=pointer, identification_weight=1.0, demo_hand_path=True, **camera)
     model = AwdaNet(config, load_backbone_weights=False)
-    torch.manual_seed(0)
-    trajectory = torch.zeros(2, 10, 4)
-    trajectory[:, :, :3] = torch.tensor([-0.1, 0.05, 0.02])
-    trajectory[:, 4:, 3] = 1.0
-    batch = {
-        "demo_features": torch.randn(2, 10, 112, 15, 20),
-        "first_frame_features": torch.randn(2, 112, 15, 20),
-        "trajectory": trajectory,
-        "demo_trajectory": trajectory,
-        "head": torch.zeros(2, dtype=torch.long),
-    }
+    batch = _grasping_batch()
     loss, info = model.compute_loss(batch)
     assert info["id_hand"] > 0 and info["id_rows"] == 1.0
     loss.backward()
