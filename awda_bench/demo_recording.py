@@ -7,8 +7,10 @@ policy watches) and by ground-truth waypoint extraction (state only, ``frames=Fa
     for t in 0 .. T-1:                     frames at t = k, 2k, ... (render_every = k) and the last
         record tcp_pos[t], gripper_opening_m[t], truth[k][t]   (state *before* a_t; k from the
                                                                 env's truth_signals(), e.g. "grasp")
-        a_t = expert.act(obs_t); record actions[t]; env.step(a_t)
+        a_t = expert.act(obs_t); env.step(a_t); record actions[t]
         stop once the expert is done (plus settle_steps) or at the suite's horizon
+
+(the loop is the package's one rollout loop, :func:`awda_bench.rollout.roll_out`).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from awda_bench.episode import EpisodeContext, EpisodeSpec, demo_frame_indices
 from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.experts import EMBODIMENT_NAMES, make_expert
 from awda_bench.render_device import render_backend
+from awda_bench.rollout import SettleAfterDone, roll_out
 from awda_bench.suites import Suite, load_suite
 from awda_bench.trajectory import Trajectory
 
@@ -129,8 +132,8 @@ def record_demo(
     truth: dict[str, list[bool]] = {}
     images: list[np.ndarray] = []
     frame_steps: list[int] = []
-    settle = 0
-    for t in range(suite.horizon_steps):
+
+    def record_state(t: int) -> None:
         if frames and t % render_every == 0:
             images.append(_capture(env))
             frame_steps.append(t)
@@ -138,13 +141,21 @@ def record_demo(
         opening.append(float(base.gripper_opening_m()[0]))
         for name, value in base.truth_signals().items():
             truth.setdefault(name, []).append(bool(value[0]))
-        action = expert.act(obs)
+
+    def record_action(steps_taken: int, action: Any, info_t: dict[str, Any]) -> bool:
         actions.append(np.asarray(action[0], dtype=np.float32))
-        obs, _, _, _, info = env.step(action)
-        if expert.done:
-            settle += 1
-            if settle > SETTLE_STEPS:
-                break
+        return settle(steps_taken, action, info_t)
+
+    settle = SettleAfterDone(expert, SETTLE_STEPS)
+    info = roll_out(
+        env.step,
+        obs,
+        expert.act,
+        suite.horizon_steps,
+        info=info,
+        before_step=record_state,
+        after_step=record_action,
+    ).info
     steps = len(actions)
     if frames and (not frame_steps or frame_steps[-1] != steps):
         images.append(_capture(env))

@@ -236,3 +236,16 @@ class Policy(Protocol):
     @property
     def waypoints(self) -> np.ndarray | None:
         """Attributed waypoints ``(K, 3 + k)`` the policy predicted this episode, if any."""
+
+
+class ClosedLoopPolicy:
+    """Base of a :class:`Policy` that acts step by step to the horizon: never done, no waypoints
+    (T-OSVI, the random baseline). Subclasses define ``name``, ``reset`` and ``act``."""
+
+    @property
+    def done(self) -> bool:
+        return False
+
+    @property
+    def waypoints(self) -> np.ndarray | None:
+        return None

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from awda_bench.experts import EMBODIMENT_NAMES
+from awda_bench.rollout import SettleAfterDone, roll_out
 
 
 def add_env_args(parser: argparse.ArgumentParser) -> None:
@@ -61,14 +62,11 @@ def _time_expert(env, suite, task: int, episodes: int) -> tuple[int, float, floa
         obs, _ = env.reset(seed=seed, options={"task": suite.task(task).reset_task})
         expert.reset(EpisodeContext(env=base, spec=EpisodeSpec(suite.name, task, seed, seed, seed)))
         start = time.perf_counter()
-        for _ in range(suite.horizon_steps):
-            action = expert.act(obs)
-            t0 = time.perf_counter()
-            obs, *_ = env.step(action)
-            in_step += time.perf_counter() - t0
-            steps += 1
-            if expert.done:
-                break
+        end = roll_out(
+            env.step, obs, expert.act, suite.horizon_steps, after_step=SettleAfterDone(expert, 0)
+        )
+        in_step += end.step_s
+        steps += end.steps
         total += time.perf_counter() - start
     return steps, total, in_step
 

@@ -71,8 +71,8 @@ def run_frames(args: argparse.Namespace) -> None:
 
 
 def run_experts(args: argparse.Namespace) -> None:
-    from awda_bench.metaworld.expert import expert_action, task_policy
-    from awda_bench.metaworld.layout import make_task_env, reset_to_layout
+    from awda_bench.metaworld.demo import first_success_step
+    from awda_bench.metaworld.layout import make_task_env
 
     tasks = args.task_names or list(ALL_TASKS)
     worst = 0
@@ -81,13 +81,9 @@ def run_experts(args: argparse.Namespace) -> None:
         env = make_task_env(task)
         lengths: list[int] = []
         for seed in range(args.seeds):
-            obs = reset_to_layout(env, seed)
-            policy = task_policy(task)
-            for t in range(1, args.max_steps + 1):
-                obs, _r, _te, _tr, info = env.step(expert_action(policy, obs)[0])
-                if info.get("success", 0.0):
-                    lengths.append(t)
-                    break
+            step = first_success_step(env, task, seed, args.max_steps)
+            if step:
+                lengths.append(step)
         env.close()
         total += args.seeds
         succeeded += len(lengths)

@@ -24,6 +24,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from awda_bench.rollout import roll_out
+
 if TYPE_CHECKING:
     from awda_bench.trajectory import Trajectory
 
@@ -63,17 +65,27 @@ def measure_episodes(suite: Any, env: Any, episodes: int, seed: int) -> dict[str
     base = env.unwrapped
     rows = []
     overheads: list[float] = []
+    successes: list[bool] = []  # the episode's success after each step
+
+    def note_success(_t: int, _a: Any, info_t: dict[str, Any]) -> bool:
+        successes.append(bool(np.asarray(info_t["success"]).reshape(-1)[0]))
+        return False
+
     for e in range(episodes):
         task = suite.held_out[e % len(suite.held_out)]
         s = seed + e
         obs, info = env.reset(seed=s, options={"task": task})
         policy.reset(EpisodeContext(env=base, spec=episode_spec_for(suite.name, task, s)))
-        once = False
-        steps = 0
-        while steps < suite.horizon_steps and not policy.done:
-            obs, _, _, _, info = env.step(policy.act(obs))
-            steps += 1
-            once |= bool(np.asarray(info["success"]).reshape(-1)[0])
+        successes.clear()
+        end = roll_out(
+            env.step,
+            obs,
+            lambda obs_t: None if policy.done else policy.act(obs_t),
+            suite.horizon_steps,
+            info=info,
+            after_step=note_success,
+        )
+        info, steps, once = end.info, end.steps, any(successes)
         st = policy.stats
         overheads += st.step_overhead_ms
         flag = {

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from awda_bench.benchmarks.throughput import episode_outcomes
-from awda_bench.episode import EpisodeContext, EpisodeSpec
+from awda_bench.episode import ClosedLoopPolicy, EpisodeContext, EpisodeSpec
 from awda_bench.evaluation.methods import served_method
 from awda_bench.evaluation.results_store import STORE_NAME
 from awda_bench.evaluation.sweep import SweepConfig, SweepResult, run_sweep
@@ -53,7 +53,7 @@ EPISODE_STEPS = 100_000
 """The latency probe's steps per episode (one episode: every timed step is an ``act``)."""
 
 
-class FrameReadingPolicy:
+class FrameReadingPolicy(ClosedLoopPolicy):
     """The latency probe's served policy: reads the third-person frame every step (one frame up)
     and returns a zero action (one action down)."""
 
@@ -69,14 +69,6 @@ class FrameReadingPolicy:
         action = np.zeros((obs.num_envs, 4), np.float32)
         action[:, 3] = -1.0 if frame.size else 1.0
         return action
-
-    @property
-    def done(self) -> bool:
-        return False
-
-    @property
-    def waypoints(self) -> np.ndarray | None:
-        return None
 
 
 class BlindPolicy(FrameReadingPolicy):

@@ -21,6 +21,13 @@ ROLE_AGENT = "agent"
 ROLE_DEMONSTRATOR = "demonstrator"
 ROLE_SYNTHESIZED = "synthesized"
 ROLES: tuple[str, ...] = (ROLE_AGENT, ROLE_DEMONSTRATOR, ROLE_SYNTHESIZED)
+
+
+def embodiment_of(role: str) -> str:
+    """The embodiment acting in ``role`` (synthesis is recorded by the agent)."""
+    return ROLE_DEMONSTRATOR if role == ROLE_DEMONSTRATOR else ROLE_AGENT
+
+
 """Who produced a unit's episodes: a scripted expert of an embodiment, or trajectory synthesis
 (free-space motion through random waypoints, recorded by the agent)."""
 

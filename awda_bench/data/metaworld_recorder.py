@@ -51,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.data.config import ROLE_AGENT, ROLE_DEMONSTRATOR, ROLE_SYNTHESIZED, CollectConfig
+from awda_bench.data.config import ROLE_DEMONSTRATOR, ROLE_SYNTHESIZED, CollectConfig
 from awda_bench.data.plan import Attempt, code_sha256
 from awda_bench.data.recorder import EpisodeArrays, EpisodeData
 from awda_bench.suites import Suite, load_suite
@@ -192,14 +192,7 @@ class MetaWorldRecorder:
                 "elapsed_steps": T,
                 "success": flags["success"],
                 "info": flags,
-                "suite": self.suite.name,
-                "split": self.config.split,
-                "task": job.task,
-                "task_name": task.name,
-                "family": task.family,
-                "variation": task.reset_task,
-                "role": job.role,
-                "embodiment": job.role if job.role == ROLE_DEMONSTRATOR else ROLE_AGENT,
+                **job.identity(task, self.suite.name, self.config.split),
                 "robot_uid": ROBOT_UID,
                 "attempt": job.attempt,
                 "kept": kept,

@@ -32,8 +32,9 @@ import json
 from dataclasses import asdict, dataclass
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
-from awda_bench.data.config import ROLE_SYNTHESIZED, CollectConfig
+from awda_bench.data.config import ROLE_SYNTHESIZED, CollectConfig, embodiment_of
 from awda_bench.episode import derive_seed
 from awda_bench.errors import UsageError
 from awda_bench.metaworld_tasks import check_task_names
@@ -80,6 +81,20 @@ class Attempt:
     @property
     def unit(self) -> tuple[str, int]:
         return (self.role, self.task)
+
+    def identity(self, task: TaskDef, suite: str, split: str) -> dict[str, Any]:
+        """What every recorded episode's meta says of whose attempt it is (``task`` is this
+        attempt's task in ``suite``)."""
+        return {
+            "suite": suite,
+            "split": split,
+            "task": self.task,
+            "task_name": task.name,
+            "family": task.family,
+            "variation": task.reset_task,
+            "role": self.role,
+            "embodiment": embodiment_of(self.role),
+        }
 
 
 @dataclass(frozen=True)

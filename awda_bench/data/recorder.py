@@ -27,13 +27,14 @@ from typing import Any
 import numpy as np
 
 from awda_bench.data.config import (
-    ROLE_AGENT,
     ROLE_DEMONSTRATOR,
     ROLE_SYNTHESIZED,
     CollectConfig,
     SynthesisConfig,
+    embodiment_of,
 )
 from awda_bench.data.plan import Attempt, code_sha256
+from awda_bench.rollout import SettleAfterDone, roll_out
 from awda_bench.suites import Suite, load_suite
 from awda_bench.trajectory import Trajectory
 
@@ -149,7 +150,7 @@ class EpisodeRecorder:
         from awda_bench.envs.embodiments import embodiment
         from awda_bench.render_device import render_backend
 
-        uid = EMBODIMENT_UIDS[_embodiment(role)]
+        uid = EMBODIMENT_UIDS[embodiment_of(role)]
         env_id = self.suite.env_id_for(task)
         kwargs = self.env_kwargs(uid, embodiment(uid).control_mode)
         env = gym.make(
@@ -168,7 +169,7 @@ class EpisodeRecorder:
     def env_for(self, task: int, role: str) -> tuple[Any, dict[str, Any]]:
         """An env for inspection (start-up checks, tests), built once and closed by
         :meth:`close`; recording always uses a fresh one (see :class:`CollectJob`)."""
-        key = (self.suite.env_id_for(task), _embodiment(role))
+        key = (self.suite.env_id_for(task), embodiment_of(role))
         if key not in self._envs:
             while len(self._envs) >= ENV_CACHE_SIZE:
                 _, (old, _) = self._envs.popitem(last=False)
@@ -230,14 +231,7 @@ class EpisodeRecorder:
                 "elapsed_steps": data.steps,
                 "success": flags.get("success", False),
                 "info": flags,
-                "suite": self.suite.name,
-                "split": self.config.split,
-                "task": job.task,
-                "task_name": task.name,
-                "family": task.family,
-                "variation": task.reset_task,
-                "role": job.role,
-                "embodiment": _embodiment(job.role),
+                **job.identity(task, self.suite.name, self.config.split),
                 "robot_uid": base.robot_uids,
                 "attempt": job.attempt,
                 "kept": success,
@@ -261,18 +255,17 @@ class EpisodeRecorder:
         from awda_bench.experts import make_expert
 
         base = env.unwrapped
-        expert = make_expert(self.suite.name, _embodiment(job.role))
+        expert = make_expert(self.suite.name, embodiment_of(job.role))
         spec = EpisodeSpec(self.suite.name, job.task, job.attempt, job.seed, job.seed)
         expert.reset(EpisodeContext(env=base, spec=spec))
-        settle = 0
-        for _ in range(self.suite.horizon_steps):
-            rec.capture_state(truth=True)
-            action = np.asarray(expert.act(obs), dtype=np.float32).reshape(1, 4)
-            obs = rec.step(action)
-            if expert.done:
-                settle += 1
-                if settle > SETTLE_STEPS:
-                    break
+        roll_out(
+            rec.step,
+            obs,
+            lambda obs_t: np.asarray(expert.act(obs_t), dtype=np.float32).reshape(1, 4),
+            self.suite.horizon_steps,
+            before_step=lambda _t: rec.capture_state(truth=True),
+            after_step=SettleAfterDone(expert, SETTLE_STEPS),
+        )
         # kept if the task was achieved during the episode (the evaluation's default metric):
         # pressed buttons pop back, so success at the end would discard every press episode
         info = rec.last_info
@@ -290,27 +283,24 @@ class EpisodeRecorder:
         emb = base.embodiment
         waypoints = cfg.draw_waypoints(seed)
         tour = WaypointTour(waypoints, FreeSpaceConfig(max_step_m=emb.max_step_m), cfg.settle_steps)
-        for _ in range(self.suite.horizon_steps):
+
+        def choose(_obs: Any) -> np.ndarray | None:
             state = RobotState(
                 tcp_pos=base.agent.tcp_pose.p[0].cpu().numpy().astype(np.float64),
                 gripper_opening_m=float(base.gripper_opening_m()[0]),
             )
             action = tour.step(state)
             if action is None:
-                break
-            rec.capture_state(truth=True)
-            env_action = emb.to_env_action(np.asarray(action, dtype=np.float32).reshape(1, 4))
-            rec.step(env_action)
+                return None
+            rec.capture_state(truth=True)  # only states an action follows are recorded
+            return emb.to_env_action(np.asarray(action, dtype=np.float32).reshape(1, 4))
+
+        roll_out(rec.step, None, choose, self.suite.horizon_steps)
         reached = tour.reached
         return all(reached), {
             "waypoints": waypoints.tolist(),
             "waypoints_reached": reached,
         }
-
-
-def _embodiment(role: str) -> str:
-    """The embodiment acting in ``role`` (synthesis is recorded by the agent)."""
-    return ROLE_DEMONSTRATOR if role == ROLE_DEMONSTRATOR else ROLE_AGENT
 
 
 class _Stepper:
@@ -323,10 +313,11 @@ class _Stepper:
     def capture_state(self, truth: bool) -> None:
         """Nothing to capture when replaying."""
 
-    def step(self, action: np.ndarray) -> Any:
-        obs, _, _, _, info = self.env.step(action)
-        self.last_info = info
-        return obs
+    def step(self, action: np.ndarray) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
+        """``env.step(action)``, its info kept."""
+        result = self.env.step(action)
+        self.last_info = result[-1]
+        return result
 
 
 def _numpy(value: Any) -> np.ndarray:
@@ -502,11 +493,11 @@ class _Recording(_Stepper):
             else None,
         )
 
-    def step(self, action: np.ndarray) -> Any:
-        obs, _, _, _, info = self.env.step(action)
-        self.arrays.add_action(action, bool(_numpy(info["success"]).reshape(-1)[0]))
-        self.last_info = info
-        return obs
+    def step(self, action: np.ndarray) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
+        """``env.step(action)``, the action and its success recorded."""
+        result = super().step(action)
+        self.arrays.add_action(action, bool(_numpy(self.last_info["success"]).reshape(-1)[0]))
+        return result
 
     def finish(self, job: Attempt, success: bool) -> EpisodeData:
         from awda_bench.mining import PressMiningConfig, mine_grasp, mine_press

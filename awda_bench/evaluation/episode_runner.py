@@ -1,4 +1,5 @@
-"""Play one episode: reset the env to a spec, loop ``policy.act`` / ``env.step``, judge it.
+"""Play one episode: reset the env to a spec, step it with ``policy.act`` through the package's one
+rollout loop (:func:`awda_bench.rollout.roll_out`), judge it.
 
 ::
 
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
@@ -42,6 +44,7 @@ from awda_bench.episode import (
 )
 from awda_bench.evaluation.episode_record import STATUS_OK, EpisodeRecord
 from awda_bench.evaluation.observations import SimObservations
+from awda_bench.rollout import roll_out
 from awda_bench.suites import Suite
 
 FrameHook = Callable[[Any], None]
@@ -83,6 +86,15 @@ def episode_observations(
     return SimObservations(env, spec, suite, extras)
 
 
+@dataclass
+class _Tally:
+    """What an episode's steps add up to (module docstring)."""
+
+    success_now: bool
+    success_once: bool = False
+    first_grip: str | None = None
+
+
 def run_episode(
     env: Any,
     policy: Policy,
@@ -120,29 +132,33 @@ def run_episode(
     )
     act_time = time.perf_counter() - t0
 
-    success_once = False
-    success_now = bool(info_flag(info, "success"))
     grip_outcome = getattr(env.unwrapped, "grip_outcome", None)
     tells_grip = grip_outcome is not None and env.unwrapped.object_distances() is not None
-    first_grip = NEVER_GRIPPED if tells_grip else None
-    steps = 0
-    while steps < suite.horizon_steps and not policy.done:
-        t0 = time.perf_counter()
-        action = policy.act(obs if privileged else observations)
-        t1 = time.perf_counter()
-        if first_grip == NEVER_GRIPPED and grip_outcome is not None:
+    tally = _Tally(
+        success_now=bool(info_flag(info, "success")),
+        first_grip=NEVER_GRIPPED if tells_grip else None,
+    )
+
+    def choose(obs_t: Any) -> Any:
+        if policy.done:
+            return None
+        action = policy.act(obs_t if privileged else observations)
+        if tally.first_grip == NEVER_GRIPPED and grip_outcome is not None:
             outcome = grip_outcome(action)
             if outcome is not None and int(outcome[0]) >= 0:
-                first_grip = GRIP_OUTCOMES[int(outcome[0])]
-        obs, _reward, _terminated, _truncated, info = env.step(action)
+                tally.first_grip = GRIP_OUTCOMES[int(outcome[0])]
+        return action
+
+    def after_step(_steps: int, _action: Any, info_t: dict[str, Any]) -> bool:
         observations.mark_stepped()
-        env_time += time.perf_counter() - t1
-        act_time += t1 - t0
-        steps += 1
-        success_now = bool(info_flag(info, "success"))
-        success_once = success_once or success_now
+        tally.success_now = bool(info_flag(info_t, "success"))
+        tally.success_once = tally.success_once or tally.success_now
         if on_frame is not None:
             on_frame(env)
+        return False
+
+    end = roll_out(env.step, obs, choose, suite.horizon_steps, info=info, after_step=after_step)
+    info = end.info
 
     waypoints = policy.waypoints
     server_notes = getattr(policy, "server_notes", None)  # a served policy's (openpi)
@@ -156,15 +172,15 @@ def run_episode(
         method=method,
         snapshot=snapshot,
         status=STATUS_OK,
-        success_once=success_once,
-        success_at_end=success_now,
+        success_once=tally.success_once,
+        success_at_end=tally.success_now,
         reached=info_flag(info, "reached"),
         grasped=info_flag(info, "grasped"),
-        first_grip=first_grip,
-        steps=steps,
+        first_grip=tally.first_grip,
+        steps=end.steps,
         wall_time_s=time.perf_counter() - t_start,
-        act_time_s=act_time,
-        env_time_s=env_time,
+        act_time_s=act_time + end.choose_s,
+        env_time_s=env_time + end.step_s,
         waypoints=None if waypoints is None else np.asarray(waypoints, dtype=float).tolist(),
         server=None if server_notes is None else dict(server_notes),
     )

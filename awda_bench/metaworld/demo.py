@@ -15,19 +15,27 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.metaworld.expert import expert_action, task_policy
+from awda_bench.metaworld.expert import scripted_chooser
 from awda_bench.metaworld.layout import reset_to_layout
+from awda_bench.rollout import roll_out
+
+
+def first_success_step(env: Any, task_name: str, seed: int, horizon: int) -> int:
+    """The step (1-based) of the expert's first success in layout ``seed``; 0 if none comes
+    within ``horizon`` steps."""
+    end = roll_out(
+        env.step,
+        reset_to_layout(env, seed),
+        scripted_chooser(task_name),
+        horizon,
+        after_step=lambda _t, _action, info: bool(info.get("success", 0.0)),
+    )
+    return end.steps if end.info.get("success", 0.0) else 0
 
 
 def demo_length(env: Any, task_name: str, seed: int, horizon: int) -> int:
     """Steps until the expert's first success in layout ``seed`` (``horizon`` if none)."""
-    obs = reset_to_layout(env, seed)
-    policy = task_policy(task_name)
-    for t in range(1, horizon + 1):
-        obs, _reward, _terminated, _truncated, info = env.step(expert_action(policy, obs)[0])
-        if info.get("success", 0.0):
-            return t
-    return horizon
+    return first_success_step(env, task_name, seed, horizon) or horizon
 
 
 def demo_frames(
@@ -44,11 +52,17 @@ def demo_frames(
     length = demo_length(env, task_name, seed, horizon)
     steps = np.linspace(0, length, count).round().astype(int)
     rendered: dict[int, np.ndarray] = {}
-    obs = reset_to_layout(env, seed)
-    policy = task_policy(task_name)
-    for t in range(length + 1):
+
+    def render_wanted(t: int) -> None:
         if t in steps:
             rendered[t] = render()
-        if t < length:
-            obs, *_ = env.step(expert_action(policy, obs)[0])
+
+    roll_out(
+        env.step,
+        reset_to_layout(env, seed),
+        scripted_chooser(task_name),
+        length,
+        before_step=render_wanted,
+    )
+    render_wanted(length)
     return np.stack([rendered[int(t)] for t in steps])

@@ -10,6 +10,7 @@ experts).
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -30,6 +31,13 @@ def expert_action(policy: Any, obs: np.ndarray) -> np.ndarray:
     """``policy``'s action for Meta-World state ``obs``, ``(1, 4)`` float32 in [-1, 1]."""
     action = np.asarray(policy.get_action(np.asarray(obs, dtype=np.float64)), dtype=np.float32)
     return np.clip(action, -1.0, 1.0).reshape(1, 4)
+
+
+def scripted_chooser(task_name: str) -> Callable[[np.ndarray], np.ndarray]:
+    """A fresh scripted policy of ``task_name`` as a rollout's ``choose``
+    (:func:`awda_bench.rollout.roll_out`): Meta-World state -> ``(4,)`` action of one env."""
+    policy = task_policy(task_name)
+    return lambda obs: expert_action(policy, obs)[0]
 
 
 class MetaWorldExpert:

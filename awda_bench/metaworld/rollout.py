@@ -10,6 +10,7 @@ which renders a frame at every state through ``before_step``).
                     a = expert(obs); env.step(a)
                     command t - 1 = tracking_command(TCP, mocap after the step, offset)
     stop AFTER_SUCCESS_STEPS past the first success, or after max_steps
+    (the package's one rollout loop, :func:`awda_bench.rollout.roll_out`)
 
 The env is left in its last state (state T, where T actions were taken).
 """
@@ -22,8 +23,9 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.metaworld.expert import expert_action, task_policy
+from awda_bench.metaworld.expert import scripted_chooser
 from awda_bench.metaworld.sawyer import robot_state, tracking_command
+from awda_bench.rollout import roll_out
 from awda_bench.trajectory import Trajectory
 
 AFTER_SUCCESS_STEPS = 5
@@ -61,28 +63,37 @@ def expert_rollout(
     """The package's scripted policy of ``task_name`` from ``task_env``'s current state (module
     docstring); ``offset`` is the hand's ``mocap - tcp`` at rest
     (:func:`~awda_bench.metaworld.sawyer.mocap_offset`)."""
-    policy = task_policy(task_name)
     obs = np.asarray(
         task_env._last_stable_obs if task_env.curr_path_length else task_env._get_obs()
     )
     tcp, opening, actions, env_actions, success = [], [], [], [], []
     success_step = 0
-    for t in range(1, max_steps + 1):
+
+    def record_state(t: int) -> None:
         if before_step is not None:
-            before_step(t - 1)
+            before_step(t)
         state = robot_state(task_env)
         tcp.append(state.tcp_pos)
         opening.append(state.gripper_opening_m)
-        action = expert_action(policy, obs)[0]
-        obs, _reward, _terminated, _truncated, info = task_env.step(action)
-        command = tracking_command(state.tcp_pos, task_env.data.mocap_pos[0], offset)
+
+    def record_step(t: int, action: np.ndarray, info: dict[str, Any]) -> bool:
+        nonlocal success_step
+        command = tracking_command(tcp[-1], task_env.data.mocap_pos[0], offset)
         actions.append([*command, action[3]])
         env_actions.append(action)
         success.append(bool(info.get("success", 0.0)))
         if success[-1] and not success_step:
             success_step = t
-        if success_step and t >= success_step + AFTER_SUCCESS_STEPS:
-            break
+        return bool(success_step) and t >= success_step + AFTER_SUCCESS_STEPS
+
+    roll_out(
+        task_env.step,
+        obs,
+        scripted_chooser(task_name),
+        max_steps,
+        before_step=record_state,
+        after_step=record_step,
+    )
     trajectory = Trajectory(
         tcp_pos=np.asarray(tcp, dtype=np.float64),
         gripper_opening_m=np.asarray(opening, dtype=np.float64),

@@ -38,6 +38,7 @@ from awda_bench.metaworld.sawyer import (
     tracking_command,
 )
 from awda_bench.primitives.waypoint_tour import WaypointTour
+from awda_bench.rollout import roll_out
 from awda_bench.trajectory import Trajectory
 
 
@@ -65,23 +66,28 @@ def synthesized_rollout(
     docstring); stops after ``max_steps`` actions at most. The env is left in its last state."""
     offset = mocap_offset(task_env)
     tour = WaypointTour(waypoints, SAWYER_EXECUTOR.motion, settle_steps)
-    tcp, opening, actions, env_actions, success = [], [], [], [], []
-    for t in range(max_steps):
+    tcp, opening, actions, success = [], [], [], []
+    env_actions: list[np.ndarray] = []
+
+    def choose(_obs: Any) -> np.ndarray | None:
         state = robot_state(task_env)
         command = tour.step(state)
         if command is None:
-            break
+            return None
         if before_step is not None:
-            before_step(t)
-        action = mocap_action(task_env, command, offset)
-        _obs, _reward, _terminated, _truncated, info = task_env.step(action)
+            before_step(len(env_actions))
         tcp.append(state.tcp_pos)
         opening.append(state.gripper_opening_m)
-        actions.append(
-            [*tracking_command(state.tcp_pos, task_env.data.mocap_pos[0], offset), action[3]]
-        )
+        return mocap_action(task_env, command, offset)
+
+    def record_step(_t: int, action: np.ndarray, info: dict[str, Any]) -> bool:
+        command = tracking_command(tcp[-1], task_env.data.mocap_pos[0], offset)
+        actions.append([*command, action[3]])
         env_actions.append(action)
         success.append(bool(info.get("success", 0.0)))
+        return False
+
+    roll_out(task_env.step, None, choose, max_steps, after_step=record_step)
     flags = np.asarray(success, dtype=bool)
     first = int(np.argmax(flags)) + 1 if flags.any() else 0
     trajectory = Trajectory(

@@ -39,6 +39,7 @@ from awda_bench.primitives.config import (
 )
 from awda_bench.primitives.executor import WaypointExecutor
 from awda_bench.primitives.wrist_camera import WRIST_LOCALIZATION, WristLocator
+from awda_bench.rollout import roll_out
 from awda_bench.trajectory import Trajectory
 from awda_bench.waypoints import extract_waypoints
 
@@ -108,22 +109,30 @@ def record_rollouts(
     n = int(env.num_envs)
     tcp, opening, actions, grasp = [], [], [], []
     has_truth = record_truth and hasattr(env, "is_grasping_target")
-    obs = None if physics_only else env.get_obs()
-    for _ in range(max_steps):
+
+    def choose(obs: Any) -> np.ndarray | None:
         if policy.done:
-            break
-        states = robot_states(env)
+            return None
+        states = robot_states(env)  # the state an action is taken from
         tcp.append([s.tcp_pos for s in states])
         opening.append([s.gripper_opening_m for s in states])
         if has_truth:
             grasp.append(_numpy(env.is_grasping_target()).astype(bool).reshape(n))
         action = np.asarray(policy.act(obs), dtype=np.float32).reshape(n, 4)
         actions.append(action)
-        if physics_only:
-            env._step_action(action)
-            env._elapsed_steps += 1
-        else:
-            obs, *_ = env.step(action)
+        return action
+
+    def step_physics(action: np.ndarray) -> tuple[None, None, None, None, dict[str, Any]]:
+        env._step_action(action)
+        env._elapsed_steps += 1
+        return None, None, None, None, {}
+
+    roll_out(
+        step_physics if physics_only else env.step,
+        None if physics_only else env.get_obs(),
+        choose,
+        max_steps,
+    )
     T = len(actions)
     tcp_a = np.asarray(tcp, dtype=np.float64).reshape(T, n, 3)
     open_a = np.asarray(opening, dtype=np.float64).reshape(T, n)

@@ -6,10 +6,10 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.episode import EpisodeContext
+from awda_bench.episode import ClosedLoopPolicy, EpisodeContext
 
 
-class RandomPolicy:
+class RandomPolicy(ClosedLoopPolicy):
     """``a_t ~ U[-1, 1]^4`` per env, from a generator seeded with the episode's seed."""
 
     name = "random"
@@ -27,11 +27,3 @@ class RandomPolicy:
 
     def act(self, obs: Any) -> np.ndarray:
         return self._rng.uniform(-1.0, 1.0, size=(self._num_envs, 4)).astype(np.float32)
-
-    @property
-    def done(self) -> bool:
-        return False
-
-    @property
-    def waypoints(self) -> np.ndarray | None:
-        return None

@@ -50,7 +50,7 @@ from typing import Any
 import numpy as np
 
 from awda_bench.data.trajectory_file import as_stored, trained_jpeg_quality
-from awda_bench.episode import EpisodeContext, Observations, observations_of
+from awda_bench.episode import ClosedLoopPolicy, EpisodeContext, Observations, observations_of
 from awda_bench.errors import CorruptFileError, UnknownChoiceError
 
 ACTION_SELECTS: tuple[str, ...] = ("sample", "mean", "mode")
@@ -76,7 +76,7 @@ def _resize(frame: np.ndarray, height: int, width: int, nearest: bool = False) -
     return cv2.resize(frame, (width, height), interpolation=interpolation)
 
 
-class TosviPolicy:
+class TosviPolicy(ClosedLoopPolicy):
     """Closed loop: one forward pass of a :class:`~awda_bench.models.tosvi_net.TosviNet` per step."""
 
     name = "tosvi"
@@ -202,11 +202,3 @@ class TosviPolicy:
         out = action.float().cpu().numpy().reshape(1, -1).clip(-1.0, 1.0)
         out[:, 3] = np.where(out[:, 3] > 0.0, 1.0, -1.0)  # gripper command binarized
         return out.astype(np.float32)
-
-    @property
-    def done(self) -> bool:
-        return False
-
-    @property
-    def waypoints(self) -> np.ndarray | None:
-        return None
