@@ -51,6 +51,7 @@ CODE_PATHS: tuple[str, ...] = (
     "primitives",
     "mining.py",
     "demo_recording.py",
+    "rollout.py",
     "trajectory.py",
     "data/recorder.py",
     "data/metaworld_recorder.py",
