@@ -11,6 +11,7 @@ from training_helpers import FROZEN_LITE0, TINY_NET, recipe_toml
 from awda_bench.cli import main
 from awda_bench.data.datasets import AwdaPairDataset, CollectedData
 from awda_bench.models.snapshot import list_snapshots
+from awda_bench.training.offline_waypoints import other_task_partners
 
 POINTER = {**TINY_NET, **FROZEN_LITE0, "head": "demo-pointer", "identification_weight": 1.0}
 
@@ -31,12 +32,17 @@ def test_study_offline_measures_every_pair_per_task(
     lines = csv.read_text().splitlines()
     header = lines[0].split(",")
     assert header[:4] == ["task", "pairs", "wp_err_cm", "end_err_cm"] and "object_near" in header
+    effect = header.index("demo_effect_cm")
     data = CollectedData(tiny_copy)
     pairs = AwdaPairDataset(data, include_synthesized=False, image_size=(64, 80))
     tasks = {ref.task for ref, _, _ in pairs.pairs}
     rows = {line.split(",")[0]: line.split(",") for line in lines[1:]}
     assert len(rows) == len(tasks) + 1 and rows["all"][1] == str(len(pairs))
     assert all(float(row[2]) > 0.0 for row in rows.values())  # cm, every task and over all
+    # the demo-swap measure needs another task's demo: none in a one-task collection
+    assert len(tasks) > 1 or rows["all"][effect] == ""
+    copy, shift = header.index("demo_copy_cm"), header.index("true_shift_cm")
+    assert float(rows["all"][copy]) > 0.0 and float(rows["all"][shift]) > 0.0
     assert "wp_err_cm" in capsys.readouterr().out
     # only these tasks
     one = min(tasks)
@@ -53,3 +59,11 @@ def test_study_offline_refuses_what_it_cannot_read(tmp_path: Path, capsys) -> No
     assert main(["study", "offline", str(missing), str(tmp_path)]) != 0
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:")
+
+
+def test_demo_swap_partners_are_of_another_task() -> None:
+    tasks = [3, 3, 3, 5, 5, 8]
+    partners = other_task_partners(tasks)
+    assert list(partners) == [3, 3, 3, 5, 5, 0]  # the nearest of another task after each, cyclic
+    assert all(tasks[j] != t for t, j in zip(tasks, partners, strict=True))
+    assert list(other_task_partners([4, 4])) == [-1, -1]  # one task: no partner

@@ -16,6 +16,16 @@ trajectory (:func:`awda_bench.waypoints.extract_waypoints`), per task::
     spread_pred_cm   mean distance of a pair's predicted waypoints to the task's mean prediction;
     spread_true_cm   the same of the true waypoints (a network that reads the scene spreads about
                      as much as the truth)
+    demo_copy_cm     median of the mean distance between the predicted waypoints and the
+                     *demonstrator's* true waypoints (its own scene's): below wp_err_cm, the
+                     network copies the demo's positions instead of carrying them onto o_1's scene
+    true_shift_cm    median of the mean distance between the demonstrator's and the agent's true
+                     waypoints: how far the two layouts move the task's waypoints (a network that
+                     copies the demo is off by about this much)
+    demo_effect_cm   median over pairs of the mean distance between the waypoints predicted with
+                     the pair's own demo and with another task's demo (the same o_1): how much
+                     the demonstration moves the prediction (0: the network ignores the demo and
+                     answers from the scene alone)
     object_near      ``demo-pointer`` snapshots: fraction of pairs whose object softmax over o_1
     moved_near       (and what-moved softmax over the demo) peaks within one cell (Chebyshev) of
                      the identification label: the first grasp, or where the hand first moves the
@@ -76,6 +86,38 @@ def _near_label(model: AwdaNet, batch: dict[str, torch.Tensor], n: int) -> dict[
     return near
 
 
+def other_task_partners(tasks: Sequence[int]) -> np.ndarray:
+    """For each sample of a batch, the index of a sample of another task whose demo it is shown
+    instead (the nearest one after it, cyclically); -1 where the batch holds one task only."""
+    partners = np.full(len(tasks), -1)
+    for i in range(len(tasks)):
+        for shift in range(1, len(tasks)):
+            j = (i + shift) % len(tasks)
+            if tasks[j] != tasks[i]:
+                partners[i] = j
+                break
+    return partners
+
+
+def _true_waypoints(data: CollectedData, episode: Any) -> np.ndarray:
+    """``(5, 3)``: the gt-waypoints rule's K = 5 waypoints of ``episode``'s trajectory."""
+    grasp = data.attributes(episode, ("grasp",))[:, 0] > 0.5
+    return extract_waypoints(data.tcp_pos(episode)[:-1], grasp, K=5)[:, :3]
+
+
+def _mean_distance_cm(a: np.ndarray, b: np.ndarray) -> float:
+    """Mean distance between the rows of ``a`` and ``b`` [cm]."""
+    return float(np.linalg.norm(a - b, axis=1).mean() * 100)
+
+
+def _largest_set(model: AwdaNet, demo: torch.Tensor, batch: dict[str, Any], n: int) -> np.ndarray:
+    """``(n, K, 3 + k)``: the largest waypoint set predicted from ``demo`` and the batch's o_1."""
+    raw = model.forward_features(
+        demo, batch["first_frame_features"], torch.zeros(n, dtype=torch.int64), batch.get("camera")
+    )
+    return model.waypoint_sets(raw)[-1].numpy()
+
+
 def pair_rows(
     snapshot: Path, data_dir: Path, tasks: Sequence[int] = (), threads: int | None = None
 ) -> list[dict[str, Any]]:
@@ -110,17 +152,21 @@ def pair_rows(
         for start in range(0, len(samples), BATCH):
             chunk = range(start, min(len(samples), start + BATCH))
             batch = torch.utils.data.default_collate([samples[i] for i in chunk])
-            raw = model.forward_features(
-                batch["demo_features"], batch["first_frame_features"],
-                torch.zeros(len(chunk), dtype=torch.int64), batch.get("camera"),
-            )  # fmt: skip
-            largest = model.waypoint_sets(raw)[-1].numpy()
+            largest = _largest_set(model, batch["demo_features"], batch, len(chunk))
+            partners = other_task_partners([pairs.pairs[i][0].task for i in chunk])
+            swapped = _largest_set(
+                model, batch["demo_features"][np.maximum(partners, 0)], batch, len(chunk)
+            )
             near = _near_label(model, batch, len(chunk))
             for n, (i, predicted) in enumerate(zip(chunk, largest, strict=True)):
-                agent = pairs.pairs[i][0]
+                agent, demo, _head = pairs.pairs[i]
+                demo_true = _true_waypoints(data, demo)
+                demo_effect = np.nan
+                if partners[n] >= 0:
+                    demo_effect = _mean_distance_cm(swapped[n, :, :3], predicted[:, :3])
                 grasp = data.attributes(agent, ("grasp",))[:, 0] > 0.5
                 tcp = data.tcp_pos(agent)
-                true = extract_waypoints(tcp[:-1], grasp, K=5)[:, :3]
+                true = _true_waypoints(data, agent)
                 flags = 1 / (1 + np.exp(-predicted[:, 3])) > 0.5
                 first_grasp = np.flatnonzero(grasp)
                 grasp_err = np.nan
@@ -130,11 +176,14 @@ def pair_rows(
                 rows.append({
                     "task": agent.task,
                     "task_name": agent.meta.get("task_name", str(agent.task)),
-                    "wp_err_cm": float(np.linalg.norm(predicted[:, :3] - true, axis=1).mean() * 100),
+                    "wp_err_cm": _mean_distance_cm(predicted[:, :3], true),
                     "end_err_cm": float(np.linalg.norm(predicted[-1, :3] - tcp[-1]) * 100),
                     "grasp_pred": bool(flags.any()),
                     "grasp_true": bool(first_grasp.size),
                     "grasp_err_cm": grasp_err,
+                    "demo_copy_cm": _mean_distance_cm(predicted[:, :3], demo_true),
+                    "true_shift_cm": _mean_distance_cm(true, demo_true),
+                    "demo_effect_cm": demo_effect,
                     "object_near": near["object_near"][n],
                     "moved_near": near["moved_near"][n],
                     "predicted": predicted[:, :3],
@@ -167,6 +216,9 @@ def per_task_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
             "grasp_err_cm": frame["grasp_err_cm"].median(),
             "spread_pred_cm": _spread([r["predicted"] for r in group]),
             "spread_true_cm": _spread([r["true"] for r in group]),
+            "demo_copy_cm": frame["demo_copy_cm"].median(),
+            "true_shift_cm": frame["true_shift_cm"].median(),
+            "demo_effect_cm": frame["demo_effect_cm"].median(),
             "object_near": frame["object_near"].mean(),
             "moved_near": frame["moved_near"].mean(),
         })  # fmt: skip
@@ -174,5 +226,8 @@ def per_task_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
     table.append({
         "task": "all", "pairs": len(rows), "wp_err_cm": every["wp_err_cm"].median(),
         "end_err_cm": every["end_err_cm"].median(),
+        "demo_copy_cm": every["demo_copy_cm"].median(),
+        "true_shift_cm": every["true_shift_cm"].median(),
+        "demo_effect_cm": every["demo_effect_cm"].median(),
     })  # fmt: skip
     return pd.DataFrame(table).set_index("task")
