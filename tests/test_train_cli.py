@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -180,6 +181,16 @@ def test_adm_blends_with_the_partners_first_frame_and_never_touches_labels() -> 
     assert not torch.equal(treat(batch, 8)["demo"], out["demo"])
     off = BatchTreatment(plain, adm=False, seed=3)(batch, 7)
     assert torch.equal(off["demo"], batch["demo"])
+    # adm_mix_agent = false: the same demo mix, o_1 left as it is (images and cached features)
+    demo_only = BatchTreatment(replace(plain, adm_mix_agent=False), adm=True, seed=3)
+    kept = demo_only(batch, 7)
+    assert torch.equal(kept["demo"], out["demo"])
+    assert torch.equal(kept["first_frame"], batch["first_frame"])
+    features = {"demo_features": batch["demo"], "first_frame_features": batch["first_frame"]}
+    mixed, kept = treat(features, 7), demo_only(features, 7)
+    assert torch.allclose(mixed["first_frame_features"], out["first_frame"], atol=1e-6)
+    assert torch.equal(kept["demo_features"], mixed["demo_features"])
+    assert kept["first_frame_features"] is batch["first_frame"]
     # shifts and jitter keep images in [0, 1] and shapes; T-OSVI stacks are treated alike
     stack = {
         "demo": batch["demo"],

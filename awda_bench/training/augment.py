@@ -13,9 +13,10 @@ Applied to training batches only (never validation), in this order, per sample `
 - **Asymmetric Demonstration Mixup** (seed S2, reference code): ``lambda_i ~ U(low, high)``;
   partner ``p = (i + 1) mod B``; every agent frame ``x <- lambda_i x + (1 - lambda_i) a_p`` with
   ``a_p`` the partner's FIRST agent frame, every demo frame ``c <- lambda_i c + (1 - lambda_i)
-  c_p`` with ``c_p`` the partner demo's FIRST frame. Labels (trajectory, actions, head) are never
-  mixed. (The reference mixes ImageNet-normalized images; normalization is per-channel affine and
-  the weights sum to 1, so mixing [0, 1] images is the same.) For T-OSVI batches the agent frames
+  c_p`` with ``c_p`` the partner demo's FIRST frame (``adm_mix_agent = false``: the demo frames
+  only). Labels (trajectory, actions, head) are never mixed. (The reference mixes
+  ImageNet-normalized images; normalization is per-channel affine and the weights sum to 1, so
+  mixing [0, 1] images is the same.) For T-OSVI batches the agent frames
   are the frame stack and the partner's first agent frame is the oldest frame of its stack.
 
 With a frozen backbone (batches of cached feature maps, ``"demo_features"`` and
@@ -121,7 +122,8 @@ class BatchTreatment:
             lam = a.adm_lambda_low + (a.adm_lambda_high - a.adm_lambda_low) * torch.rand(
                 b, generator=g
             )
-            demo, agent = asymmetric_demo_mixup(demo, agent, lam.to(demo.device))
+            mixed_demo, mixed_agent = asymmetric_demo_mixup(demo, agent, lam.to(demo.device))
+            demo, agent = mixed_demo, mixed_agent if a.adm_mix_agent else agent
         out = dict(batch)
         out["demo"] = demo
         out[key] = agent if key == "frames" else agent[:, 0]
@@ -139,6 +141,8 @@ class BatchTreatment:
         lam = a.adm_lambda_low + (a.adm_lambda_high - a.adm_lambda_low) * torch.rand(b, generator=g)
         agent = batch[key] if stack else batch[key].unsqueeze(1)
         mixed_demo, mixed_agent = asymmetric_demo_mixup(demo, agent, lam.to(demo.device))
+        if not a.adm_mix_agent:
+            return {**batch, "demo_features": mixed_demo}
         return {
             **batch,
             "demo_features": mixed_demo,

@@ -20,7 +20,8 @@ Layout::
               trajectory_points, identification_contact
     [train]   batch_size, learning_rate, max_steps, snapshot_every_steps,
               validate_every_steps, validation_batches, seed
-    [augment] adm_lambda_low, adm_lambda_high, shift_px, brightness, contrast, saturation
+    [augment] adm_lambda_low, adm_lambda_high, adm_mix_agent, shift_px, brightness, contrast,
+              saturation
     [suite.<name>.model]  [model] fields that differ on that suite's collections (optional; e.g.
               Meta-World's 224x224 frames); ``train`` applies them (:meth:`Recipe.for_suite`)
 
@@ -151,6 +152,10 @@ class AugmentRecipe:
     """ADM: lambda ~ U(low, high) per sample (reference: U(0.3, 1))."""
     adm_lambda_high: float = 1.0
     """ADM: upper end of lambda's range."""
+    adm_mix_agent: bool = True
+    """ADM mixes the agent's frames with the partner's first agent frame, as the reference does;
+    ``false``: only the demo frames are mixed and o_1 stays the sample's own scene (a deviation,
+    screened on Meta-World: recipe-study-metaworld.md)."""
     shift_px: int = 4
     """Random translation of each sample's demo frames and (independently) its agent frames by
     up to this many pixels per axis, edges replicated. No flips and no rescaling: the labels are
