@@ -253,6 +253,9 @@ def test_the_page_reads_each_cell_from_its_source(reports: Path) -> None:
     ref = page.reference[page.reference["method"] == "gt-waypoints"].set_index("family")
     assert ref.loc["All", OURS] == "0.96 ± 0.02"  # (4 + 0.90 + 0.85) / 6
     assert ref.loc["Basketball", OURS] == "0.90 ± 0.07†"
+    # a mean's note points at its rows instead of repeating every family's note
+    assert ref.loc["All", "note"].startswith("the mean of the 6 families above")
+    assert ref.loc["Basketball", "note"] not in ref.loc["All", "note"].split("; ")[0]
     full1_all = page.s4[(page.s4.index == "All") & (page.s4["column"] == "Full-1 (`full-1`)")]
     assert full1_all.iloc[0][OURS] == NOT_RUN
     assert "needs all six families" in full1_all.iloc[0]["note"]

@@ -176,6 +176,9 @@ class PageCell:
     """Index entries it was read from."""
     strata: tuple[tuple[np.ndarray, ...], ...] | None = field(repr=False, compare=False)
     """Per family, each snapshot's 0/1 episode outcomes (``None``: not rebuildable)."""
+    summary: str = ""
+    """A mean over other rows (All, [easy], ...): the note printed instead of theirs, which
+    stand in those rows."""
 
     def ours(self) -> str:
         """``"0.83 ± 0.07"`` (``†``: binomial SE; ``(N err)``: error episodes)."""
@@ -294,6 +297,7 @@ def mean_over_families(cells: Sequence[PageCell], unit: str = "families") -> Pag
         ci_note=ci_note,
         entries=entries,
         strata=strata,
+        summary=f"the mean of the {len(cells)} {unit} above (how each was made: its row's note)",
     )
 
 
@@ -510,8 +514,14 @@ def _sources(cell: PageCell) -> str:
     return "; ".join(dict.fromkeys(_link(e) for e in cell.entries))
 
 
-def _notes(cell: PageCell) -> str:
+def _entry_notes(cell: PageCell) -> str:
+    """The notes of the index entries ``cell`` was read from."""
     return "; ".join(dict.fromkeys(e.note for e in cell.entries if e.note))
+
+
+def _notes(cell: PageCell) -> str:
+    """A row's note: a mean's summary, else its entries' notes."""
+    return cell.summary or _entry_notes(cell)
 
 
 def _count(rate: float, n: int) -> int:
@@ -672,7 +682,7 @@ class _Builder:
             row[f"{CI} [all]"] = all_cell.ci_text() if isinstance(all_cell, PageCell) else "–"
             row[SOURCE] = _sources(found[0]) if found else "–"
             why = next((c for c in cells.values() if isinstance(c, str)), "")
-            row[NOTE] = "; ".join(n for n in ((_notes(found[0]) if found else ""), why) if n)
+            row[NOTE] = "; ".join(n for n in ((_entry_notes(found[0]) if found else ""), why) if n)
             rows.append(row)
             index.append(f"{title} (`{key}`)")
         return pd.DataFrame(rows, index=pd.Index(index, name="column"))
