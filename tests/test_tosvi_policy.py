@@ -155,7 +155,7 @@ def test_wrong_snapshots_and_selections_are_refused(tmp_path: Path, snapshot: Pa
     save_snapshot(awda, build_model(AwdaConfig(trunk=_trunk())), step=1)
     with pytest.raises(CorruptFileError, match="holds a 'awda' model"):
         TosviPolicy(awda)
-    with pytest.raises(CorruptFileError, match="not tosvi-depth"):
+    with pytest.raises(CorruptFileError, match="not 'tosvi-depth'"):
         TosviPolicy(snapshot, arch="tosvi-depth")
     with pytest.raises(UnknownChoiceError):
         TosviPolicy(snapshot, "argmax")

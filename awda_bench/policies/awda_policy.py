@@ -32,12 +32,13 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.data.trajectory_file import as_stored, trained_jpeg_quality
+from awda_bench.data.trajectory_file import as_stored
 from awda_bench.episode import EpisodeContext, observations_of
-from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
+from awda_bench.errors import UnknownChoiceError, UsageError
 from awda_bench.models.agent_cameras import camera_index, config_cameras
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig
+from awda_bench.policies.trained_model import load_trained
 from awda_bench.primitives.config import (
     CENTRE_SUFFIX,
     GRASP_SELECTS,
@@ -100,24 +101,13 @@ class AwdaPolicy:
     name = "awda"
 
     def __init__(self, snapshot: str | Path, config: AwdaPolicyConfig | None = None) -> None:
-        import torch
-
-        from awda_bench.models.snapshot import load_snapshot
-
         self.config = config or AwdaPolicyConfig()
-        loaded = load_snapshot(Path(snapshot))
-        if loaded.arch != "awda":
-            raise CorruptFileError(
-                f"snapshot {snapshot} holds a {loaded.arch!r} model, not 'awda'; pick an AWDA checkpoint directory"
-            )
-        self.device = "cuda" if torch.cuda.is_available() else "cpu"
-        self.jpeg_quality = trained_jpeg_quality(loaded.training)
+        trained = load_trained(snapshot, ("awda",), AwdaNet, "pick an AWDA checkpoint directory")
+        self.device = trained.device
+        self.jpeg_quality = trained.jpeg_quality
         """Live frames are JPEG-compressed at this quality first, as the training frames were."""
-        model = loaded.build_model(self.device)
-        if not isinstance(model, AwdaNet):
-            raise CorruptFileError(f"snapshot {snapshot} did not build an AwdaNet")
-        self.model: AwdaNet = model
-        trunk = model.config.trunk
+        self.model: AwdaNet = trained.model
+        trunk = self.model.config.trunk
         self.image_size = (trunk.image_height_px, trunk.image_width_px)
         self.demo_frames = trunk.demo_frames
         self.episode_config = self.config

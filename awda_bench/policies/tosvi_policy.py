@@ -49,9 +49,10 @@ from typing import Any
 
 import numpy as np
 
-from awda_bench.data.trajectory_file import as_stored, trained_jpeg_quality
+from awda_bench.data.trajectory_file import as_stored
 from awda_bench.episode import ClosedLoopPolicy, EpisodeContext, Observations, observations_of
-from awda_bench.errors import CorruptFileError, UnknownChoiceError
+from awda_bench.errors import UnknownChoiceError
+from awda_bench.policies.trained_model import load_trained
 
 ACTION_SELECTS: tuple[str, ...] = ("sample", "mean", "mode")
 """How an action is read from the predicted mixture; the first is the default."""
@@ -84,29 +85,24 @@ class TosviPolicy(ClosedLoopPolicy):
     def __init__(
         self, snapshot: str | Path, action_select: str = "sample", arch: str | None = None
     ) -> None:
-        import torch
-
-        from awda_bench.models.snapshot import load_snapshot
         from awda_bench.models.tosvi_net import TosviNet
 
         if action_select not in ACTION_SELECTS:
             raise UnknownChoiceError("--action-select", action_select, ACTION_SELECTS)
-        loaded = load_snapshot(Path(snapshot))
         wanted = (arch,) if arch is not None else TOSVI_ARCHS
-        if loaded.arch not in wanted:
-            raise CorruptFileError(
-                f"snapshot {snapshot} holds a {loaded.arch!r} model, not {' or '.join(wanted)}; "
-                "pick a checkpoint directory trained with --method "
-                f"{' / '.join(wanted)} (or --ablation no-waypoints)"
-            )
-        self.device = "cuda" if torch.cuda.is_available() else "cpu"
-        self.jpeg_quality = trained_jpeg_quality(loaded.training)
+        trained = load_trained(
+            snapshot,
+            wanted,
+            TosviNet,
+            f"pick a checkpoint directory trained with --method {' / '.join(wanted)} "
+            "(or --ablation no-waypoints)",
+        )
+        self.device = trained.device
+        self.jpeg_quality = trained.jpeg_quality
         """Live frames are JPEG-compressed at this quality first, as the training frames were."""
-        model = loaded.build_model(self.device)
-        if not isinstance(model, TosviNet):
-            raise CorruptFileError(f"snapshot {snapshot} did not build a TosviNet")
+        model = trained.model
         model.eval()
-        self.name = loaded.arch  # "tosvi" or "tosvi-depth"
+        self.name = trained.arch  # "tosvi" or "tosvi-depth"
         self.model: TosviNet = model
         self.action_select = action_select
         cfg = model.config
