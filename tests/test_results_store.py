@@ -132,3 +132,17 @@ def test_a_store_from_before_the_privileged_flag_and_first_grip_reads_and_gains_
         grips = store.episodes()["first_grip"].tolist()
     assert flags == {"old": None, "new": 1}
     assert grips == ["other"]
+
+
+def test_a_run_that_finds_the_store_made_meanwhile_uses_it(tmp_path: Path) -> None:
+    # two runs started together: both saw no store; the first one's is in place when the second
+    # finishes its own schema. The second must not replace it (the first may already write to
+    # it) nor leave its partial file behind.
+    first = ResultsStore(tmp_path, create=True)
+    inode = first.path.stat().st_ino
+    second = ResultsStore.__new__(ResultsStore)  # the second run, past its "no store yet" check
+    second.path = first.path
+    second._create_whole()
+    assert first.path.stat().st_ino == inode
+    assert not list(tmp_path.glob(f"{STORE_NAME}.new*"))
+    ResultsStore(tmp_path, create=True)  # and it opens the first one's store

@@ -15,9 +15,12 @@ Each record is committed as it arrives, so a killed run loses at most the episod
 Every check (schema, protocol) happens before the first write, so a refused run leaves the file
 untouched.
 
-A new store is created whole or not at all: the schema is written into ``results.sqlite.new``
-(one transaction), then renamed into place; a store that could not be finished (no space left,
-an I/O error) is removed, so the same command starts afresh once the cause is fixed (a half-made
+A new store is created whole or not at all: the schema is written into
+``results.sqlite.new.<pid>`` (one transaction), then hard-linked into place only if no store is
+there yet (two runs started together into one directory: the first link wins and both use that
+store; a rename would let the second replace a store the first already writes to), and the
+partial file is removed; a store that could not be finished (no space left, an I/O error) is
+removed, so the same command starts afresh once the cause is fixed (a half-made
 file used to be refused for good: "store schema None"). Any write the store cannot make is a
 :class:`~awda_bench.errors.StorageError` naming the file and the cause, never a traceback; the
 episodes committed before it stay.
@@ -25,7 +28,9 @@ episodes committed before it stay.
 
 from __future__ import annotations
 
+import errno
 import json
+import os
 import sqlite3
 import time
 from collections.abc import Iterable
@@ -41,6 +46,9 @@ from awda_bench.evaluation.methods import SnapshotRef
 
 STORE_NAME = "results.sqlite"
 """File name of the store inside a run directory."""
+
+NO_HARD_LINKS = frozenset({errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.ENOSYS})
+"""``os.link`` errors of a file system without hard links (a new store is renamed into place)."""
 
 SCHEMA_VERSION = "1"
 """Bumped on any incompatible schema change."""
@@ -173,7 +181,7 @@ class ResultsStore:
     def _create_whole(self) -> None:
         """Write an empty store with its schema next to :attr:`path`, then rename it into place
         (module docstring); on failure nothing is left behind."""
-        partial = self.path.with_name(STORE_NAME + ".new")
+        partial = self.path.with_name(f"{STORE_NAME}.new.{os.getpid()}")
         try:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             partial.unlink(missing_ok=True)
@@ -184,7 +192,15 @@ class ResultsStore:
                     conn.execute("INSERT INTO meta VALUES ('schema_version', ?)", (SCHEMA_VERSION,))
             finally:
                 conn.close()
-            partial.replace(self.path)
+            try:
+                os.link(partial, self.path)
+            except FileExistsError:
+                pass  # another run made the store first: this one uses it (module docstring)
+            except OSError as exc:
+                if exc.errno not in NO_HARD_LINKS:
+                    raise
+                partial.replace(self.path)  # a file system without hard links: a plain rename
+            partial.unlink(missing_ok=True)
         except (OSError, sqlite3.OperationalError) as exc:
             try:
                 partial.unlink(missing_ok=True)
