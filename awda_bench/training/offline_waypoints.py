@@ -99,10 +99,22 @@ def other_task_partners(tasks: Sequence[int]) -> np.ndarray:
     return partners
 
 
-def _true_waypoints(data: CollectedData, episode: Any) -> np.ndarray:
-    """``(5, 3)``: the gt-waypoints rule's K = 5 waypoints of ``episode``'s trajectory."""
-    grasp = data.attributes(episode, ("grasp",))[:, 0] > 0.5
-    return extract_waypoints(data.tcp_pos(episode)[:-1], grasp, K=5)[:, :3]
+class _Truth:
+    """Each episode's mined grasp flags, TCP path and the gt-waypoints rule's K = 5 waypoints,
+    read once (an episode stands in many pairs)."""
+
+    def __init__(self, data: CollectedData) -> None:
+        self.data = data
+        self._seen: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+    def __call__(self, episode: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(grasp (T,), tcp (T + 1, 3), waypoints (5, 3))`` of ``episode``."""
+        key = id(episode)
+        if key not in self._seen:
+            grasp = self.data.attributes(episode, ("grasp",))[:, 0] > 0.5
+            tcp = self.data.tcp_pos(episode)
+            self._seen[key] = (grasp, tcp, extract_waypoints(tcp[:-1], grasp, K=5)[:, :3])
+        return self._seen[key]
 
 
 def _mean_distance_cm(a: np.ndarray, b: np.ndarray) -> float:
@@ -148,6 +160,7 @@ def pair_rows(
         pairs, load_or_build(data, trunk, frames_needed(pairs), progress=False)
     )
     rows: list[dict[str, Any]] = []
+    truth = _Truth(data)  # the pairs' refs live as long as ``pairs``: their ids stay theirs
     with torch.no_grad():
         for start in range(0, len(samples), BATCH):
             chunk = range(start, min(len(samples), start + BATCH))
@@ -160,13 +173,11 @@ def pair_rows(
             near = _near_label(model, batch, len(chunk))
             for n, (i, predicted) in enumerate(zip(chunk, largest, strict=True)):
                 agent, demo, _head = pairs.pairs[i]
-                demo_true = _true_waypoints(data, demo)
+                grasp, tcp, true = truth(agent)
+                demo_true = truth(demo)[2]
                 demo_effect = np.nan
                 if partners[n] >= 0:
                     demo_effect = _mean_distance_cm(swapped[n, :, :3], predicted[:, :3])
-                grasp = data.attributes(agent, ("grasp",))[:, 0] > 0.5
-                tcp = data.tcp_pos(agent)
-                true = _true_waypoints(data, agent)
                 flags = 1 / (1 + np.exp(-predicted[:, 3])) > 0.5
                 first_grasp = np.flatnonzero(grasp)
                 grasp_err = np.nan
