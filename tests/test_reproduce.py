@@ -94,6 +94,11 @@ def test_the_summary_names_the_command_that_decides_the_same_config(tmp_path: Pa
         {"suite": "mosaic", "hold_out": "drawer", "fit_check": False, "episodes": 4},
         {"suite": "mosaic", "hold_out": "door", "data": tmp_path / "shared" / "train"},
         {"episodes_per_task": 20},
+        {
+            "seed": 2,
+            "val_data": tmp_path / "shared" / "test",
+            "data": tmp_path / "shared" / "train",
+        },
     ):
         config = ReproduceConfig(
             **{"suite": "pick_place", "out": tmp_path / "rep", "recipe": "small", **kw}
@@ -245,6 +250,21 @@ def test_leave_one_family_out_runs_can_share_one_collection(tmp_path: Path) -> N
     assert alone["collect train"].config.out == out / "data" / "train"  # type: ignore[union-attr]
 
 
+def test_a_replicate_shares_the_collections_and_passes_its_seed(tmp_path: Path) -> None:
+    """--seed with --data and --val-data: a second training of a recipe collects nothing."""
+    shared = tmp_path / "rp-a" / "data"
+    _collection_manifest(shared / "train", "pick_place", 20)
+    stages = _plan(
+        tmp_path / "rp-a-seed1", columns=("full-1",), episodes_per_task=20, seed=1,
+        data=shared / "train", val_data=shared / "test",
+    )  # fmt: skip
+    assert "collect test" not in stages and stages["collect train"].done  # type: ignore[attr-defined]
+    train = stages["train full-1"].argv  # type: ignore[attr-defined]
+    assert train[train.index("--seed") + 1] == "1"
+    assert train[train.index("--val-data") + 1] == str(shared / "test")
+    assert "--seed" not in _plan(tmp_path / "b", columns=("full-1",))["train full-1"].argv  # type: ignore[attr-defined]
+
+
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
@@ -256,6 +276,11 @@ def test_leave_one_family_out_runs_can_share_one_collection(tmp_path: Path) -> N
         (["--suite", "metaworld", "--hold-out", "drawer"], "is for --suite mosaic"),
         (["--suite", "metaworld_ml46"], "unknown suite 'metaworld_ml46'"),
         (["--suite", "pick_place", "--workers", "0"], "--workers must be at least 1"),
+        (["--suite", "pick_place", "--seed", "-1"], "--seed must be >= 0"),
+        (
+            ["--suite", "mosaic", "--hold-out", "door", "--val-data", "x"],
+            "--val-data and --hold-out both",
+        ),
     ],
 )
 def test_bad_input_is_one_line_exit_2(

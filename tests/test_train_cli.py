@@ -377,6 +377,8 @@ def test_bad_input_is_one_line_and_leaves_snapshots_untouched(
             "--recipe",
             str(other_size.with_name("tiny96b.toml")),
         ],
+        "recipe 'tiny' with [train] seed = 0, not 1": [*base, "--seed", "1"],
+        "--seed must be >= 0": [*base, "--seed", "-1"],
         "unknown method 'daml'": ["--method", "daml", *base[2:]],
         "unknown device 'tpu'": [*base, "--device", "tpu"],
     }
@@ -393,3 +395,8 @@ def test_bad_input_is_one_line_and_leaves_snapshots_untouched(
         assert needle in err and len(err.splitlines()) == 1, (needle, err)
     after = {p.name: p.read_bytes() for p in out.iterdir() if p.is_file()}
     assert after == before
+    # --seed trains a replicate of the same recipe: recorded, and it resumes under the same seed
+    replicate = [*base[:4], "--out", str(tmp_path / "seed3"), *base[6:], "--seed", "3"]
+    assert _train(*replicate, "--steps", "1") == 0
+    assert json.loads((tmp_path / "seed3/train.json").read_text())["recipe"]["train"]["seed"] == 3
+    assert _train(*replicate, "--steps", "2") == 0

@@ -68,6 +68,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--episodes", type=int, default=None, help="episodes per held-out task (default: suite's)"
     )
     parser.add_argument("--steps", type=int, default=None, help="override the recipe's steps")
+    parser.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="every trained column's [train] seed (a replicate of the recipe; default its own)",
+    )
     parser.add_argument("--threads", type=int, default=None, help="torch threads for training")
     parser.add_argument("--no-fit-check", action="store_true", help="skip Full-1 on train tasks")
     parser.add_argument(
@@ -89,6 +95,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="the training collection (default OUT/data/train; collected there if incomplete). "
         "It holds every training task whatever --hold-out, so MOSAIC's leave-one-family-out runs "
         "can share one: --hold-out door --data runs/rp-drawer/data/train --out runs/rp-door",
+    )
+    parser.add_argument(
+        "--val-data",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="the validation collection (default OUT/data/test, collected there); variants on "
+        "one --data can share one: --data runs/A/data/train --val-data runs/A/data/test",
     )
     parser.add_argument("--dry-run", action="store_true", help="print the plan and stop")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars in stages")
@@ -116,10 +130,12 @@ def config_from_args(args: argparse.Namespace) -> ReproduceConfig:
         snapshots=args.snapshots,
         episodes=args.episodes,
         steps=args.steps,
+        seed=args.seed,
         threads=args.threads,
         fit_check=not args.no_fit_check,
         grasp_select=args.grasp_select,
         data=args.data,
+        val_data=args.val_data,
         dry_run=args.dry_run,
         progress=not args.no_progress,
     )

@@ -42,6 +42,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--steps", type=int, default=None, help="train until this step")
     parser.add_argument("--snapshot-every", type=int, default=None, help="steps between snapshots")
     parser.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="replace the recipe's [train] seed (a replicate training of the same recipe)",
+    )
+    parser.add_argument(
         "--device", default="auto", help=f"one of {', '.join(DEVICE_CHOICES)} (default auto)"
     )
     parser.add_argument(
@@ -76,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
         recipe=args.recipe,
         steps=args.steps,
         snapshot_every=args.snapshot_every,
+        seed=args.seed,
         device=args.device,
         hold_out=args.hold_out,
         val_data=args.val_data,

@@ -166,6 +166,8 @@ class ReproduceConfig:
     snapshots: int = 10
     episodes: int | None = None
     steps: int | None = None
+    seed: int | None = None
+    """Every trained column's ``[train] seed`` (``train --seed``); ``None``: the recipe's."""
     threads: int | None = None
     fit_check: bool = True
     grasp_select: str = DEFAULT_GRASP_SELECT
@@ -175,6 +177,9 @@ class ReproduceConfig:
     task of the suite whatever ``hold_out`` (``train --hold-out`` leaves the family's episodes
     out), so MOSAIC's six leave-one-family-out runs can share one collection, and its feature
     cache, each in its own ``out``."""
+    val_data: Path | None = None
+    """The validation collection (a ``--split test`` one); ``None``: ``OUT/data/test``, collected
+    there. Variants of a recipe on one training collection can share one (``--data`` beside it)."""
     dry_run: bool = False
     progress: bool = True
     """Let each stage show its progress bar (with ETA) on stderr."""

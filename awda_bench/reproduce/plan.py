@@ -257,6 +257,13 @@ def _check_config(config: ReproduceConfig) -> None:
             f"--hold-out is for --suite mosaic; {config.suite} holds out the tasks its suite file "
             "names (pick_place: 14 and 15); drop --hold-out"
         )
+    if config.val_data is not None and config.hold_out is not None:
+        raise UsageError(
+            "--val-data and --hold-out both name the validation set (--hold-out validates on the "
+            "held-out family); drop --val-data"
+        )
+    if config.seed is not None and config.seed < 0:
+        raise UsageError(f"--seed must be >= 0, got {config.seed}")
 
 
 @dataclass(frozen=True)
@@ -310,7 +317,9 @@ def _collect_stages(config: ReproduceConfig, suite: Suite) -> tuple[list[Stage],
         )
     ]  # fmt: skip
     val: list[str] = []
-    if config.hold_out is None:
+    if config.val_data is not None:
+        val = ["--val-data", str(config.val_data)]  # train checks it is a complete test split
+    elif config.hold_out is None:
         n_test = len(suite.eval_tasks) * config.val_episodes_per_task * 2
         collect_test = CollectConfig(
             suite=config.suite, split="test", embodiment="both",
@@ -348,6 +357,8 @@ def _train_argv(plan: _Plan, key: str, ckpt: Path) -> list[str]:
         argv += ["--hold-out", config.hold_out]
     if config.steps is not None:
         argv += ["--steps", str(config.steps)]
+    if config.seed is not None:
+        argv += ["--seed", str(config.seed)]
     if config.threads is not None:
         argv += ["--threads", str(config.threads)]
     return argv

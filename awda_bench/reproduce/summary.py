@@ -62,6 +62,7 @@ def command_line(config: ReproduceConfig) -> str:
         ("snapshots", "--snapshots"),
         ("episodes", "--episodes"),
         ("steps", "--steps"),
+        ("seed", "--seed"),
         ("threads", "--threads"),
         ("grasp_select", "--grasp-select"),
     ):
@@ -72,6 +73,8 @@ def command_line(config: ReproduceConfig) -> str:
         words.append("--no-fit-check")
     if config.data is not None:
         words.append(f"--data {config.data}")
+    if config.val_data is not None:
+        words.append(f"--val-data {config.val_data}")
     words.append(f"--out {config.out}")
     return " ".join(words)
 

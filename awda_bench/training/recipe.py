@@ -232,8 +232,11 @@ class Recipe:
         blob = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":")).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
 
-    def with_schedule(self, max_steps: int | None, snapshot_every: int | None) -> Recipe:
-        """The recipe with ``--steps`` / ``--snapshot-every`` applied."""
+    def with_schedule(
+        self, max_steps: int | None, snapshot_every: int | None, seed: int | None = None
+    ) -> Recipe:
+        """The recipe with ``--steps`` / ``--snapshot-every`` / ``--seed`` applied (``--seed``
+        replaces ``[train] seed``: a replicate training of the same recipe)."""
         from dataclasses import replace
 
         train = self.train
@@ -241,6 +244,8 @@ class Recipe:
             train = replace(train, max_steps=max_steps)
         if snapshot_every is not None:
             train = replace(train, snapshot_every_steps=snapshot_every)
+        if seed is not None:
+            train = replace(train, seed=seed)
         return replace(self, train=train)
 
 

@@ -93,6 +93,8 @@ class TrainRequest:
     """Overrides the recipe's ``max_steps``."""
     snapshot_every: int | None = None
     """Overrides the recipe's ``snapshot_every_steps``."""
+    seed: int | None = None
+    """Overrides the recipe's ``[train] seed`` (initial weights, batch order, augmentation)."""
     device: str = "auto"
     """``auto``, ``cpu`` or ``cuda``."""
     hold_out: str | None = None
@@ -109,6 +111,8 @@ class TrainRequest:
             raise UsageError(f"--steps must be >= 1, got {self.steps}")
         if self.snapshot_every is not None and self.snapshot_every < 1:
             raise UsageError(f"--snapshot-every must be >= 1, got {self.snapshot_every}")
+        if self.seed is not None and self.seed < 0:
+            raise UsageError(f"--seed must be >= 0, got {self.seed}")
         if self.threads is not None and self.threads < 1:
             raise UsageError(f"--threads must be >= 1, got {self.threads}")
         if self.hold_out is not None and self.val_data is not None:
@@ -235,7 +239,7 @@ def check_checkpoint_dir(out: Path, record: dict[str, Any]) -> bool:
         if "column" in differ:
             detail.append(f"it trains {theirs['column']['slug']}, not {ours['column']['slug']}")
         if "recipe" in differ:
-            detail.append(f"recipe {theirs['recipe']['name']!r}, not {ours['recipe']['name']!r}")
+            detail.append(_recipe_difference(theirs["recipe"], ours["recipe"]))
         if "data_fingerprint" in differ:
             detail.append("other data")
         if "hold_out" in differ:
@@ -247,6 +251,21 @@ def check_checkpoint_dir(out: Path, record: dict[str, Any]) -> bool:
             "to resume it, or train into a new --out"
         )
     return True
+
+
+def _recipe_difference(theirs: dict[str, Any], ours: dict[str, Any]) -> str:
+    """How a checkpoint directory's recipe differs from the one asked for: its name, or (same
+    name, e.g. another ``--seed``) the fields that differ."""
+    if theirs.get("name") != ours.get("name"):
+        return f"recipe {theirs.get('name')!r}, not {ours.get('name')!r}"
+    fields = [
+        f"[{table}] {key} = {theirs.get(table, {}).get(key)!r}, not {value!r}"
+        for table, values in ours.items()
+        if isinstance(values, dict)
+        for key, value in values.items()
+        if theirs.get(table, {}).get(key) != value
+    ]
+    return f"recipe {ours.get('name')!r} with {', '.join(fields) or 'other fields'}"
 
 
 # ----------------------------------------------------------------------------- pieces
@@ -637,7 +656,9 @@ class _Progress:
 
 def _run_training(request: TrainRequest) -> TrainOutcome:
     column = column_for(request.method, request.ablation)
-    recipe = load_recipe(request.recipe).with_schedule(request.steps, request.snapshot_every)
+    recipe = load_recipe(request.recipe).with_schedule(
+        request.steps, request.snapshot_every, request.seed
+    )
     device = resolve_device(request.device)
     sources, recipe = _open_sources(request, recipe, column)
     if request.threads is not None:
