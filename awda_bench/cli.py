@@ -27,7 +27,13 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         module = importlib.import_module(f"awda_bench.commands.{name}")
-        command_parser = module.add_parser(sub)
+        command_parser = sub.add_parser(
+            name,
+            help=module.HELP,
+            description=module.DESCRIPTION,
+            **getattr(module, "PARSER_OPTIONS", {}),
+        )
+        module.add_arguments(command_parser)
         command_parser.set_defaults(_run=module.run)
     return parser
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from awda_bench.cli import main
+from awda_bench.cli import build_parser, main
 from awda_bench.errors import ProtocolMismatchError, UnknownChoiceError, UsageError
 from awda_bench.evaluation.sweep import SweepConfig
 from awda_bench.reproduce.config import ReproduceConfig, parse_columns
@@ -80,14 +80,12 @@ def test_stage_commands_label_each_column_and_pass_the_options(tmp_path: Path) -
 
 
 def test_the_summary_names_the_command_that_decides_the_same_config(tmp_path: Path) -> None:
-    import argparse
     import shlex
 
     from awda_bench.commands import reproduce as command
     from awda_bench.reproduce.summary import command_line
 
-    parser = argparse.ArgumentParser()
-    command.add_parser(parser.add_subparsers())
+    parser = build_parser()
     for kw in (
         {},
         {"columns": ("full-1", "tosvi"), "steps": 40, "grasp_select": "waypoint", "workers": 1},
@@ -134,7 +132,6 @@ def test_each_collect_and_run_stage_command_decides_the_config_its_progress_is_r
 ) -> None:
     """The plan reads a stage's progress from its config (the layer below the commands); the
     stage's command line, parsed by that command's own parser, decides the same config."""
-    import argparse
     import dataclasses
 
     from awda_bench.commands import collect, run
@@ -151,8 +148,7 @@ def test_each_collect_and_run_stage_command_decides_the_config_its_progress_is_r
         assert len(checked) == len([s for s in stages if s.argv[0] in commands])
         for stage in checked:
             command = commands[stage.argv[0]]
-            parser = argparse.ArgumentParser()
-            command.add_parser(parser.add_subparsers())
+            parser = build_parser()
             decided = command.config_from_args(parser.parse_args(stage.argv))
             if stage.argv[0] == "run":  # the command line recorded in the store
                 decided = dataclasses.replace(decided, command=stage.config.command)

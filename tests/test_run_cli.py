@@ -145,14 +145,12 @@ def test_sigkill_mid_sweep_then_resume_equals_an_uninterrupted_run(
 
 
 def test_num_waypoints_selects_the_gt_waypoints_variant(tmp_path: Path, capsys) -> None:
-    import argparse
 
-    from awda_bench.commands.run import add_parser, config_from_args
+    from awda_bench.cli import build_parser
+    from awda_bench.commands.run import config_from_args
     from awda_bench.evaluation.methods import SnapshotRef, get_method, make_policy
 
-    parser = argparse.ArgumentParser()
-    sub = parser.add_subparsers()
-    add_parser(sub)
+    parser = build_parser()
 
     def method(*extra: str) -> str:
         args = parser.parse_args(["run", "--suite", "mosaic", "--out", str(tmp_path), *extra])
@@ -248,14 +246,13 @@ def test_labels_keep_checkpoint_dirs_apart_and_split_train_evaluates_training_ta
 
 
 def test_grasp_select_centre_folds_into_the_centre_methods(tmp_path: Path, capsys) -> None:
-    import argparse
 
-    from awda_bench.commands.run import add_parser, config_from_args
+    from awda_bench.cli import build_parser
+    from awda_bench.commands.run import config_from_args
     from awda_bench.evaluation.methods import SnapshotRef, get_method, make_policy
     from awda_bench.policies.gt_waypoints import GtWaypointsPolicy
 
-    parser = argparse.ArgumentParser()
-    add_parser(parser.add_subparsers())
+    parser = build_parser()
 
     def method(*extra: str) -> str:
         args = parser.parse_args(["run", "--suite", "mosaic", "--out", str(tmp_path), *extra])

@@ -164,13 +164,11 @@ def test_wrong_snapshots_and_selections_are_refused(tmp_path: Path, snapshot: Pa
 
 
 def test_action_select_is_folded_into_the_method(tmp_path: Path, capsys) -> None:
-    import argparse
 
-    from awda_bench.cli import main
-    from awda_bench.commands.run import add_parser, config_from_args
+    from awda_bench.cli import build_parser, main
+    from awda_bench.commands.run import config_from_args
 
-    parser = argparse.ArgumentParser()
-    add_parser(parser.add_subparsers())
+    parser = build_parser()
 
     def method(*extra: str) -> str:
         args = parser.parse_args(["run", "--suite", "pick_place", "--out", str(tmp_path), *extra])

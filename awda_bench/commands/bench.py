@@ -80,16 +80,16 @@ BENCHMARKS: dict[str, tuple[str, str, str, bool]] = {
 }
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "bench",
-        help="speed benchmarks (controller, env, primitives, harness, episode-cost, render-cost, "
-        "inference, soft-dtw, serve, metaworld)",
-        description="Run one benchmark; 'bench NAME --help' lists its options.",
-    )
+HELP = (
+    "speed benchmarks (controller, env, primitives, harness, episode-cost, render-cost, "
+    "inference, soft-dtw, serve, metaworld)"
+)
+DESCRIPTION = "Run one benchmark; 'bench NAME --help' lists its options."
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("benchmark", metavar="BENCHMARK", help=f"one of: {', '.join(BENCHMARKS)}")
     parser.add_argument("options", nargs=argparse.REMAINDER, help="the benchmark's own options")
-    return parser
 
 
 def run(args: argparse.Namespace) -> int:

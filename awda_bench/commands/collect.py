@@ -21,16 +21,17 @@ QUICK_TASKS = 2
 """``--quick``: the first this-many tasks of the split."""
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "collect",
-        help="record training data into DATA_DIR (ManiSkill trajectory files; resumable)",
-        description="Run the scripted expert of every task of a split (and/or trajectory "
-        "synthesis) and keep the successful episodes: per step the third-person frame (JPEG), "
-        "wrist depth (agent), TCP pose, gripper opening, action, mined attributes, simulator "
-        "truth and env state. Re-running the same command resumes; exit 1 if attempts ended in "
-        "errors (re-run to retry them).",
-    )
+HELP = "record training data into DATA_DIR (ManiSkill trajectory files; resumable)"
+DESCRIPTION = (
+    "Run the scripted expert of every task of a split (and/or trajectory "
+    "synthesis) and keep the successful episodes: per step the third-person frame (JPEG), "
+    "wrist depth (agent), TCP pose, gripper opening, action, mined attributes, simulator "
+    "truth and env state. Re-running the same command resumes; exit 1 if attempts ended in "
+    "errors (re-run to retry them)."
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--suite", required=True, help="suite name (pick_place, mosaic, metaworld)")
     parser.add_argument("--split", default="train", help=f"one of {', '.join(SPLITS)}")
     parser.add_argument(
@@ -70,7 +71,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--tasks-dir", type=Path, default=SUITES_DIR, help=argparse.SUPPRESS)
     parser.add_argument("--chunk-episodes", type=int, default=10, help=argparse.SUPPRESS)
-    return parser
 
 
 def config_from_args(args: argparse.Namespace) -> CollectConfig:

@@ -6,13 +6,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+HELP = "inspect a collected DATA_DIR (counts, lengths, disk size, contact sheet)"
+DESCRIPTION = "Inspect training data written by `collect`."
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "dataset",
-        help="inspect a collected DATA_DIR (counts, lengths, disk size, contact sheet)",
-        description="Inspect training data written by `collect`.",
-    )
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     sub = parser.add_subparsers(dest="dataset_command", required=True, metavar="ACTION")
     info = sub.add_parser(
         "info",
@@ -48,7 +46,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     s6.add_argument("--out", type=Path, required=True, help="PNG to write")
     s6.add_argument("--episodes", type=int, default=8, help="panels (default 8)")
     s6.add_argument("--columns", type=int, default=4, help="panels per row (default 4)")
-    return parser
 
 
 def run(args: argparse.Namespace) -> int:

@@ -8,15 +8,15 @@ from pathlib import Path
 from awda_bench.errors import UsageError
 from awda_bench.experts import EMBODIMENT_NAMES
 
+HELP = "record a scripted demonstration (video + per-step states)"
+DESCRIPTION = (
+    "Run the scripted expert of a suite task and save third-person frames as MP4 "
+    "and, next to it, the per-step trajectory (TCP, gripper opening, actions, grasp truth) "
+    "as .npz."
+)
 
-def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = sub.add_parser(
-        "demo",
-        help="record a scripted demonstration (video + per-step states)",
-        description="Run the scripted expert of a suite task and save third-person frames as MP4 "
-        "and, next to it, the per-step trajectory (TCP, gripper opening, actions, grasp truth) "
-        "as .npz.",
-    )
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--suite", default="pick_place", help="suite name (tasks/<name>.toml)")
     parser.add_argument("--task", type=int, required=True, help="task index within the suite")
     parser.add_argument("--seed", type=int, default=0, help="scene seed")
@@ -34,7 +34,6 @@ def add_parser(sub: argparse._SubParsersAction) -> argparse.ArgumentParser:
         default=2,
         help="render every k-th control step (video fps = control rate / k)",
     )
-    return parser
 
 
 def run(args: argparse.Namespace) -> int:

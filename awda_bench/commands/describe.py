@@ -18,15 +18,12 @@ from awda_bench.models.cli_options import add_model_args, model_from_args
 from awda_bench.models.config import config_to_dict
 from awda_bench.models.synthetic import random_forward_inputs
 
+HELP = "shapes and parameter counts of a learned model (awda, tosvi, tosvi-depth)"
+DESCRIPTION = "Build a model, run one batch-1 forward pass, print shapes and parameters."
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "describe",
-        help="shapes and parameter counts of a learned model (awda, tosvi, tosvi-depth)",
-        description="Build a model, run one batch-1 forward pass, print shapes and parameters.",
-    )
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_model_args(parser)
-    return parser
 
 
 def _count(module: nn.Module) -> int:

@@ -28,20 +28,20 @@ PACKAGES = (
 )
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "doctor",
-        help="check the installation: versions, sim backend, render device, one rendered frame",
-        description="Print versions, the simulation backend and the render device SAPIEN found, then "
-        "render one test frame. Exits 3 with the fix when rendering is impossible.",
-    )
+HELP = "check the installation: versions, sim backend, render device, one rendered frame"
+DESCRIPTION = (
+    "Print versions, the simulation backend and the render device SAPIEN found, then "
+    "render one test frame. Exits 3 with the fix when rendering is impossible."
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--frame",
         type=Path,
         default=Path("reports/figures/doctor_frame.png"),
         help="where to write the test frame (default: %(default)s)",
     )
-    return parser
 
 
 def run(args: argparse.Namespace) -> int:

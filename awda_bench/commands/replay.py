@@ -20,18 +20,17 @@ from pathlib import Path
 
 from awda_bench.errors import UsageError
 
+HELP = "replay a collected trajectory file with ManiSkill's replay_trajectory"
+DESCRIPTION = (
+    "Register the awda_bench envs, then run ManiSkill's replay_trajectory with the remaining "
+    "arguments (see `python -m awda_bench replay --help-maniskill`)."
+)
+PARSER_OPTIONS = {"add_help": False, "prefix_chars": "+"}
+"""Every ``-...`` argument goes to ManiSkill untouched (``replay --help`` is ManiSkill's)."""
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "replay",
-        help="replay a collected trajectory file with ManiSkill's replay_trajectory",
-        description="Register the awda_bench envs, then run ManiSkill's replay_trajectory with "
-        "the remaining arguments (see `python -m awda_bench replay --help-maniskill`).",
-        add_help=False,
-        prefix_chars="+",  # every "-..." argument goes to ManiSkill untouched
-    )
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("maniskill_args", nargs=argparse.REMAINDER)
-    return parser
 
 
 def _traj_path(argv: list[str]) -> str | None:

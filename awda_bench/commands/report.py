@@ -11,15 +11,15 @@ from awda_bench.reporting.aggregate import DEFAULT_METRIC, METRICS
 from awda_bench.reporting.report import write_report
 from awda_bench.reporting.results_page import DEFAULT_INDEX, write_results_page
 
+HELP = "write tables S3/S4, per-snapshot and grasp tables, figures and summary.json"
+DESCRIPTION = (
+    "Read RUN_DIR/results.sqlite and write Markdown, CSV and LaTeX tables, figures "
+    "and "
+    "summary.json into the report directory. Missing episodes and errors are flagged loudly."
+)
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "report",
-        help="write tables S3/S4, per-snapshot and grasp tables, figures and summary.json",
-        description="Read RUN_DIR/results.sqlite and write Markdown, CSV and LaTeX tables, figures "
-        "and "
-        "summary.json into the report directory. Missing episodes and errors are flagged loudly.",
-    )
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--runs", type=Path, default=Path("runs"), help="run directory (default runs/)"
     )
@@ -44,7 +44,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         default=DEFAULT_INDEX,
         help=f"results index for --results-page (default {DEFAULT_INDEX})",
     )
-    return parser
 
 
 def run(args: argparse.Namespace) -> int:

@@ -21,16 +21,16 @@ from awda_bench.reproduce.plan import format_plan, plan_stages
 from awda_bench.reproduce.stages import run_stages
 from awda_bench.reproduce.summary import write_summary
 
+HELP = "from an empty directory to Table S3/S4 rows: collect, train, evaluate, report"
+DESCRIPTION = (
+    "Collect the suite's training (and validation) data, train every requested "
+    "Table S3 column, evaluate each column's last N snapshots on the held-out tasks and write "
+    "the report, printing the plan with estimated times first. Resumable: re-running the "
+    "same command skips finished collections, training runs and evaluated episodes."
+)
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "reproduce",
-        help="from an empty directory to Table S3/S4 rows: collect, train, evaluate, report",
-        description="Collect the suite's training (and validation) data, train every requested "
-        "Table S3 column, evaluate each column's last N snapshots on the held-out tasks and write "
-        "the report, printing the plan with estimated times first. Resumable: re-running the "
-        "same command skips finished collections, training runs and evaluated episodes.",
-    )
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--suite", required=True, help=f"one of {', '.join(SUITES)}")
     parser.add_argument(
         "--recipe", default="small", help="training recipe: small, paper or a .toml path"
@@ -106,7 +106,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     parser.add_argument("--dry-run", action="store_true", help="print the plan and stop")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars in stages")
-    return parser
 
 
 def config_from_args(args: argparse.Namespace) -> ReproduceConfig:

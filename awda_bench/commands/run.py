@@ -23,16 +23,17 @@ QUICK_EPISODES = 3
 """``--quick``: episodes per evaluation unit (one snapshot)."""
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "run",
-        help="evaluate a method on a suite (resumable; results in RUN_DIR/results.sqlite)",
-        description="Play every episode of the suite's evaluation protocol with a method and "
-        "record one "
-        "row per episode. Re-running the same command skips finished episodes and retries errors. "
-        "Exit 1 if episodes of this invocation ended in errors (they are stored and retried next "
-        "time).",
-    )
+HELP = "evaluate a method on a suite (resumable; results in RUN_DIR/results.sqlite)"
+DESCRIPTION = (
+    "Play every episode of the suite's evaluation protocol with a method and "
+    "record one "
+    "row per episode. Re-running the same command skips finished episodes and retries errors. "
+    "Exit 1 if episodes of this invocation ended in errors (they are stored and retried next "
+    "time)."
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--suite",
         required=True,
@@ -142,7 +143,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--tasks-dir", type=Path, default=SUITES_DIR, help=argparse.SUPPRESS)
     parser.add_argument("--env-factory", default=DEFAULT_ENV_FACTORY, help=argparse.SUPPRESS)
-    return parser
 
 
 def _method(args: argparse.Namespace) -> str:

@@ -36,14 +36,15 @@ DEFAULT_PORT = 8765
 """``--port`` when none is given."""
 
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "serve",
-        help="serve a method's policy on a websocket (evaluate it with run --method remote)",
-        description="Build one method's policy and serve it until interrupted; each harness "
-        "worker that connects plays its episodes on a policy of its own. Evaluate it with "
-        "`python -m awda_bench run --suite S --method remote --policy-url ws://HOST:PORT`.",
-    )
+HELP = "serve a method's policy on a websocket (evaluate it with run --method remote)"
+DESCRIPTION = (
+    "Build one method's policy and serve it until interrupted; each harness "
+    "worker that connects plays its episodes on a policy of its own. Evaluate it with "
+    "`python -m awda_bench run --suite S --method remote --policy-url ws://HOST:PORT`."
+)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--method",
         required=True,
@@ -74,7 +75,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         default=DEFAULT_PORT,
         help=f"port (default {DEFAULT_PORT}; 0: any free port, printed)",
     )
-    return parser
 
 
 def served_snapshot(spec: MethodSpec, checkpoints: Path | None, name: str | None) -> SnapshotRef:

@@ -8,15 +8,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+HELP = "offline screening of a trained snapshot (waypoint error per task on collected pairs)"
+DESCRIPTION = (
+    "The recipe studies' offline measure: a frozen-trunk AWDA snapshot's waypoints "
+    "against the ground-truth waypoints of collected (agent, demonstrator) pairs, per task "
+    "(reports/learned/recipe-study*.md). Not the evaluation protocol."
+)
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "study",
-        help="offline screening of a trained snapshot (waypoint error per task on collected pairs)",
-        description="The recipe studies' offline measure: a frozen-trunk AWDA snapshot's waypoints "
-        "against the ground-truth waypoints of collected (agent, demonstrator) pairs, per task "
-        "(reports/learned/recipe-study*.md). Not the evaluation protocol.",
-    )
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     studies = parser.add_subparsers(dest="study", required=True, metavar="STUDY")
     offline = studies.add_parser(
         "offline",
@@ -32,7 +32,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     offline.add_argument("--threads", type=int, default=None, help="torch threads")
     offline.add_argument("--csv", type=Path, default=None, help="also write the table here")
-    return parser
 
 
 def run(args: argparse.Namespace) -> int:

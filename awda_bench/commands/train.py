@@ -11,20 +11,20 @@ from awda_bench.models.config import DEVICE_CHOICES
 from awda_bench.training.columns import ABLATIONS, METHODS, TRAINABLE
 from awda_bench.training.recipe import available_recipes
 
+_COLUMNS = "; ".join(
+    f"{c.name} = --method {c.method}" + (f" --ablation {c.ablation}" if c.ablation else "")
+    for c in TRAINABLE
+)
+HELP = "train one Table S3 column (method + ablation) from a collected DATA_DIR"
+DESCRIPTION = (
+    "Train a learned method from a `collect` directory into CKPT_DIR: snapshots "
+    "every N steps (what `run --method awda --checkpoints CKPT_DIR` evaluates), "
+    "metrics.csv, TensorBoard scalars, learning_curve.png. Re-running the same command "
+    f"resumes from the latest snapshot. Columns: {_COLUMNS}."
+)
 
-def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    columns = "; ".join(
-        f"{c.name} = --method {c.method}" + (f" --ablation {c.ablation}" if c.ablation else "")
-        for c in TRAINABLE
-    )
-    parser = subparsers.add_parser(
-        "train",
-        help="train one Table S3 column (method + ablation) from a collected DATA_DIR",
-        description="Train a learned method from a `collect` directory into CKPT_DIR: snapshots "
-        "every N steps (what `run --method awda --checkpoints CKPT_DIR` evaluates), "
-        "metrics.csv, TensorBoard scalars, learning_curve.png. Re-running the same command "
-        f"resumes from the latest snapshot. Columns: {columns}.",
-    )
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--method", required=True, help=f"one of {', '.join(METHODS)}")
     parser.add_argument(
         "--ablation",
@@ -66,7 +66,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--threads", type=int, default=None, help="torch CPU threads (default: torch's)"
     )
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
-    return parser
 
 
 def run(args: argparse.Namespace) -> int:
