@@ -146,3 +146,25 @@ def test_a_run_that_finds_the_store_made_meanwhile_uses_it(tmp_path: Path) -> No
     assert first.path.stat().st_ino == inode
     assert not list(tmp_path.glob(f"{STORE_NAME}.new*"))
     ResultsStore(tmp_path, create=True)  # and it opens the first one's store
+
+
+def test_the_carry_columns_round_trip_and_an_older_store_gains_them(
+    tmp_path: Path, protocol
+) -> None:
+    carried = replace(_record(0), carry="off_target", release_xy_m=0.1, release_dz_m=0.2)
+    with _planned(tmp_path, protocol) as store:
+        store.record(protocol.fingerprint, carried)
+        row = store.episodes().iloc[0]
+    assert (row["carry"], row["release_xy_m"], row["release_dz_m"]) == ("off_target", 0.1, 0.2)
+    conn = sqlite3.connect(tmp_path / STORE_NAME)  # as written before the carry analysis
+    for column in ("carry", "release_xy_m", "release_dz_m"):
+        conn.execute(f"ALTER TABLE episodes DROP COLUMN {column}")
+    conn.commit()
+    conn.close()
+    with ResultsStore(tmp_path, create=False) as store:  # read: unknown
+        old = store.episodes()
+    assert old["carry"].isna().all() and old["release_dz_m"].isna().all() and len(old) == 1
+    with ResultsStore(tmp_path, create=True) as store:  # opened to write: gains the columns
+        store.record(protocol.fingerprint, replace(carried, episode=1, seed=1))
+        rows = store.episodes()
+    assert rows["carry"].isna().tolist() == [True, False] and rows["carry"][1] == "off_target"

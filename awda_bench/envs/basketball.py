@@ -242,6 +242,12 @@ class BasketballEnv(AwdaTaskEnv):
         """(n,) simulator truth: both fingers press on the target ball."""
         return self._is_grasping_per_env(self.balls, self.target_ball_index)
 
+    def place_goal(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """The target hoop's goal point (its ring's centre); over it within ``success_radius_m``
+        (a ball released there above the ring drops through it)."""
+        radius = torch.full((self.num_envs,), self.layout.success_radius_m, device=self.device)
+        return self.goal_position(), radius
+
     def _evaluate_task(self) -> dict[str, torch.Tensor]:
         dist = torch.linalg.norm(self.target_position() - self.goal_position(), dim=1)
         return {

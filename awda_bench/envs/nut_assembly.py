@@ -319,6 +319,14 @@ class NutAssemblyEnv(AwdaTaskEnv):
         """(n,) simulator truth: both fingers press on the target nut."""
         return self._is_grasping_per_env(self.nuts, self.target_nut_index)
 
+    def place_goal(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """The target nut's hole centre resting on the goal peg's base plate; over the peg within
+        ``xy_tolerance_m`` (the success test's)."""
+        goal = self.peg_position().clone()
+        goal[:, 2] += self.target_half_height()
+        tolerance = torch.full((self.num_envs,), self.layout.xy_tolerance_m, device=self.device)
+        return goal, tolerance
+
     def _evaluate_task(self) -> dict[str, torch.Tensor]:
         lay = self.layout
         nut = self.target_position()

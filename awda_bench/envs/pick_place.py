@@ -167,6 +167,13 @@ class PickPlaceEnv(AwdaTaskEnv):
         """(n,) simulator truth: both fingers press on the target (Panda's contact-force test)."""
         return self._is_grasping_per_env(self.objects, self.target_object_index)
 
+    def place_goal(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """The goal compartment's floor centre; over it within the compartment's half width
+        (the smaller half side: the inscribed circle of the success test's rectangle)."""
+        c = self.target_compartment
+        half = (self._compartment_hi[c] - self._compartment_lo[c]).min(dim=1).values / 2
+        return self.compartment_center(), half
+
     def target_position(self) -> torch.Tensor:
         return self.target_pose()[0]
 

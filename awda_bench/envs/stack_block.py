@@ -196,6 +196,14 @@ class StackBlockEnv(AwdaTaskEnv):
         """(n,) simulator truth: the fingers hold cube A (the agent's contact-force test)."""
         return self._is_grasping_per_env(self.cubes, self.cube_a)
 
+    def place_goal(self) -> tuple[torch.Tensor, torch.Tensor]:
+        """A's centre one edge above B's; over B within half an edge (the footprint's inscribed
+        circle)."""
+        edge = self.layout.edge_m
+        b_pos = self.base_pose()[0]
+        goal = b_pos + torch.tensor([0.0, 0.0, edge], device=self.device)
+        return goal, torch.full((self.num_envs,), edge / 2, device=self.device)
+
     def _evaluate_task(self) -> dict[str, torch.Tensor]:
         lay = self.layout
         a_raw = self._per_env_cube(self.cube_a, lambda c: c.pose.raw_pose)

@@ -111,6 +111,13 @@ class AwdaTaskEnv(ExactStateEnv):
         """(n,) simulator truth: the fingers hold the target (contact forces)."""
         return torch.zeros(self.num_envs, dtype=torch.bool, device=self.device)
 
+    def place_goal(self) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """Where a carried target must go, for the carry analysis
+        (:mod:`awda_bench.evaluation.carry`): ``((n, 3) the point :meth:`target_position` is at
+        in a success [m], (n,) the horizontal distance from it within which the target is over
+        the goal [m])``; ``None`` (this default): the task carries nothing to a place."""
+        return None
+
     def _is_grasping_per_env(
         self, bodies: Sequence[Actor | Link], index: torch.Tensor
     ) -> torch.Tensor:
@@ -214,7 +221,7 @@ class AwdaTaskEnv(ExactStateEnv):
         return qpos[:, -2] + qpos[:, -1]
 
     # ------------------------------------------------------------------ step hooks
-    def _grip_commanded(self, action: Any) -> torch.Tensor | None:
+    def grip_commanded(self, action: Any) -> torch.Tensor | None:
         """(n,) bool: does ``action`` (as :meth:`step` takes it) command the gripper closed?
         ``None`` for an action that is not one (dx, dy, dz, grip) row per env."""
         if action is None or isinstance(action, dict):
@@ -231,7 +238,7 @@ class AwdaTaskEnv(ExactStateEnv):
         where it does not close the gripper. ``None`` where the task does not tell
         (:meth:`object_distances`) or ``action`` is not one row per env. The harness asks this
         before each step until the first grip: what the policy went for."""
-        closing = self._grip_commanded(action)
+        closing = self.grip_commanded(action)
         if closing is None:
             return None
         if not bool(closing.any()):
@@ -248,7 +255,7 @@ class AwdaTaskEnv(ExactStateEnv):
     def _step_action(self, action: Any) -> Any:
         # latch the grasp attempt on the commanded action; "reached" is latched by evaluate() on
         # every state (reset and after each step), with the attempts commanded up to that state
-        closing = self._grip_commanded(action)
+        closing = self.grip_commanded(action)
         if closing is not None:
             self.grip_attempted |= closing
         return super()._step_action(action)

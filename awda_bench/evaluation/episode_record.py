@@ -44,6 +44,13 @@ class EpisodeRecord:
     first_grip: str | None = None
     """What the gripper was first commanded closed on: one of
     :data:`~awda_bench.episode.GRIP_OUTCOMES` or ``"never"`` (``None``: the task does not tell)."""
+    carry: str | None = None
+    """What became of the grasped target: one of :data:`~awda_bench.evaluation.carry.CARRY_OUTCOMES`
+    (``None``: never grasped, or the task carries nothing to a place)."""
+    release_xy_m: float | None = None
+    """Where the fingers let the target go: its horizontal distance from over its goal [m]."""
+    release_dz_m: float | None = None
+    """... and its height above the goal [m] (``None``: never released)."""
     steps: int = 0
     """Control steps played."""
     wall_time_s: float = 0.0

@@ -12,6 +12,8 @@ rollout loop (:func:`awda_bench.rollout.roll_out`), judge it.
     reached/grasped = info_T["reached"/"grasped"] (the envs latch them), None if absent
     first_grip     = env.grip_outcome(a_t) at the first t whose a_t closes the gripper
                      (before that step), "never" if none does, None if the task does not tell
+    carry, release_xy_m, release_dz_m = what became of a grasped target on a task with a place
+                     goal (:mod:`awda_bench.evaluation.carry`), None elsewhere
 
 Every episode starts in a freshly built scene (``reconfigure``, ~0.2 s on pick-place): PhysX
 carries contact caches and solver state from one episode of a scene into the next, and
@@ -42,6 +44,7 @@ from awda_bench.episode import (
     is_privileged,
     seed_globals,
 )
+from awda_bench.evaluation.carry import CarryTally
 from awda_bench.evaluation.episode_record import STATUS_OK, EpisodeRecord
 from awda_bench.evaluation.observations import SimObservations
 from awda_bench.rollout import roll_out
@@ -138,6 +141,7 @@ def run_episode(
         success_now=bool(info_flag(info, "success")),
         first_grip=NEVER_GRIPPED if tells_grip else None,
     )
+    carry = CarryTally.for_env(env.unwrapped)
 
     def choose(obs_t: Any) -> Any:
         if policy.done:
@@ -149,10 +153,12 @@ def run_episode(
                 tally.first_grip = GRIP_OUTCOMES[int(outcome[0])]
         return action
 
-    def after_step(_steps: int, _action: Any, info_t: dict[str, Any]) -> bool:
+    def after_step(_steps: int, action: Any, info_t: dict[str, Any]) -> bool:
         observations.mark_stepped()
         tally.success_now = bool(info_flag(info_t, "success"))
         tally.success_once = tally.success_once or tally.success_now
+        if carry is not None:
+            carry.after_step(action, info_flag(info_t, "grasped"))
         if on_frame is not None:
             on_frame(env)
         return False
@@ -160,6 +166,8 @@ def run_episode(
     end = roll_out(env.step, obs, choose, suite.horizon_steps, info=info, after_step=after_step)
     info = end.info
 
+    grasped = info_flag(info, "grasped")
+    release = None if carry is None else carry.release
     waypoints = policy.waypoints
     server_notes = getattr(policy, "server_notes", None)  # a served policy's (openpi)
     return EpisodeRecord(
@@ -175,8 +183,11 @@ def run_episode(
         success_once=tally.success_once,
         success_at_end=tally.success_now,
         reached=info_flag(info, "reached"),
-        grasped=info_flag(info, "grasped"),
+        grasped=grasped,
         first_grip=tally.first_grip,
+        carry=None if carry is None else carry.outcome(grasped, tally.success_once),
+        release_xy_m=None if release is None else release.xy_m,
+        release_dz_m=None if release is None else release.dz_m,
         steps=end.steps,
         wall_time_s=time.perf_counter() - t_start,
         act_time_s=act_time + end.choose_s,

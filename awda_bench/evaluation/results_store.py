@@ -87,6 +87,9 @@ CREATE TABLE IF NOT EXISTS episodes (
     reached INTEGER,
     grasped INTEGER,
     first_grip TEXT,
+    carry TEXT,
+    release_xy_m REAL,
+    release_dz_m REAL,
     steps INTEGER NOT NULL,
     wall_time_s REAL NOT NULL,
     act_time_s REAL NOT NULL,
@@ -124,6 +127,9 @@ EPISODE_COLUMNS = (
     "reached",
     "grasped",
     "first_grip",
+    "carry",
+    "release_xy_m",
+    "release_dz_m",
     "steps",
     "wall_time_s",
     "act_time_s",
@@ -138,6 +144,9 @@ ADDED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("snapshots", "privileged", "INTEGER"),
     ("episodes", "first_grip", "TEXT"),
     ("episodes", "server", "TEXT"),
+    ("episodes", "carry", "TEXT"),
+    ("episodes", "release_xy_m", "REAL"),
+    ("episodes", "release_dz_m", "REAL"),
 )
 """(table, column, type) added since schema 1 without bumping it: an older store opened to
 write gains them; one opened to read shows them as NULL."""
@@ -247,7 +256,8 @@ class ResultsStore:
     def _add_missing_columns(self) -> None:
         """A store written before a column existed gains it (NULL: unknown): ``privileged``
         (before methods declared privilege), ``first_grip`` (before the first-grip analysis),
-        ``server`` (before openpi-served policies)."""
+        ``server`` (before openpi-served policies), ``carry`` and ``release_*`` (before the carry
+        analysis)."""
         for table, column, kind in ADDED_COLUMNS:
             columns = {r[1] for r in self._conn.execute(f"PRAGMA table_info({table})")}
             if column not in columns:
@@ -363,6 +373,9 @@ class ResultsStore:
             _bool(rec.reached),
             _bool(rec.grasped),
             rec.first_grip,
+            rec.carry,
+            rec.release_xy_m,
+            rec.release_dz_m,
             rec.steps,
             rec.wall_time_s,
             rec.act_time_s,
@@ -394,12 +407,14 @@ class ResultsStore:
     # --- reading -------------------------------------------------------------------------------
 
     def episodes(self) -> pd.DataFrame:
-        """Every episode row; ``first_grip`` is NULL (unknown) in a store written before it."""
+        """Every episode row; a column added since schema 1 (:data:`ADDED_COLUMNS`) is NULL
+        (unknown) in a store written before it."""
         rows = pd.read_sql_query(
             "SELECT * FROM episodes ORDER BY protocol, method, snapshot, task, episode", self._conn
         )
-        if "first_grip" not in rows.columns:
-            rows["first_grip"] = None
+        for table, column, _ in ADDED_COLUMNS:
+            if table == "episodes" and column not in rows.columns:
+                rows[column] = None
         return rows
 
     def snapshots(self) -> pd.DataFrame:

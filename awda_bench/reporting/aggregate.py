@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 
 from awda_bench.episode import GRIP_OUTCOMES, NEVER_GRIPPED
+from awda_bench.evaluation.carry import CARRY_OUTCOMES
 
 METRICS = ("success_once", "success_at_end")
 """Success columns a report can use."""
@@ -264,6 +265,32 @@ def grasp_analysis(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
             "grasp_wp_spread_cm",
         ],
     )  # fmt: skip
+
+
+def carry_analysis(episodes: pd.DataFrame) -> pd.DataFrame:
+    """Per (suite, method, family): what became of the grasped targets
+    (:mod:`awda_bench.evaluation.carry`), over the ok episodes that recorded a ``carry``: how many
+    grasped, the share of each outcome (:data:`CARRY_OUTCOMES`) and, over those released, the
+    median distance from over the goal and height above it at the release [cm]. Empty where no
+    episode recorded one (a task without a place goal, or a store written before the analysis).
+    ``placed`` counts success_once episodes (the metric may differ)."""
+    columns = [
+        "suite", "method", "family", "grasped", *CARRY_OUTCOMES, "release_xy_cm",
+        "release_dz_cm",
+    ]  # fmt: skip
+    if "carry" not in episodes:
+        return pd.DataFrame(columns=columns)
+    told = episodes[(episodes["status"] == "ok") & episodes["carry"].notna()]
+    out = []
+    for (suite, method, family), g in told.groupby(["suite", "method", "family"], sort=True):
+        released = g[g["release_xy_m"].notna()]
+        row: dict[str, object] = {"suite": suite, "method": method, "family": family}
+        row["grasped"] = len(g)
+        row |= {outcome: float((g["carry"] == outcome).mean()) for outcome in CARRY_OUTCOMES}
+        for key, source in (("release_xy_cm", "release_xy_m"), ("release_dz_cm", "release_dz_m")):
+            row[key] = float(released[source].median()) * 100.0 if len(released) else None
+        out.append(row)
+    return pd.DataFrame(out, columns=columns)
 
 
 def per_task(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:

@@ -8,6 +8,7 @@ Written files::
     s4.{md,csv,tex}             MOSAIC families + All (only when such families were evaluated)
     per_snapshot.{md,csv,tex}   success per snapshot, every method
     grasp.{md,csv,tex}          reached / grasped / success per (suite, method)
+    carry.{md,csv,tex}          what became of the grasped targets (when any episode recorded it)
     per_task.{md,csv,tex}       success per (suite, method, task), pooled over snapshots
     counts.{md,csv,tex}         expected vs recorded episodes, errors
     errors.{md,csv,tex}         one line per error episode (when there are any)
@@ -216,6 +217,19 @@ def _sections(read: _StoreTables, metric: str) -> list[tuple[str, str, pd.DataFr
             grasp,
         )
     )
+    carry = aggregate.carry_analysis(episodes)
+    if len(carry):
+        sections.append(
+            (
+                "carry",
+                "Carry analysis (ok episodes that grasped a target they must carry to a place: "
+                "placed = success; held = never released; dropped = let go with the gripper "
+                "commanded closed; off_target / on_target = released open farther than the "
+                "task's tolerance from over its goal, or over it and still failed; release_*_cm: "
+                "median distance from over the goal and height above it at the release)",
+                carry.set_index("suite"),
+            )
+        )
     sections.append(
         (
             "per_task",
@@ -292,7 +306,7 @@ def write_report(
     return result
 
 
-_OUTPUT_STEMS = ("s3", "s4", "per_snapshot", "grasp", "per_task", "counts", "errors")
+_OUTPUT_STEMS = ("s3", "s4", "per_snapshot", "grasp", "carry", "per_task", "counts", "errors")
 """Table files a report may write (``<stem>.md/.csv/.tex``)."""
 
 
