@@ -115,13 +115,17 @@ def test_the_episode_record_and_the_report_table_carry_it(tmp_path: Path) -> Non
     record = run_episode(CarryFakeEnv(), policy, spec, suite, method="m", snapshot="builtin")
     assert record.grasped and record.carry == "off_target"
     assert record.release_xy_m == pytest.approx(0.1) and record.release_dz_m == pytest.approx(0.2)
+    assert record.place_goal == [0.0, 0.0, 0.0]
     plain = run_episode(FakeEnv(), SkillPolicy(), spec, suite, method="m", snapshot="builtin")
     assert plain.carry is None and plain.release_xy_m is None  # no place goal: not analysed
 
     def episode(carry: str | None, xy: float | None) -> dict[str, Any]:
+        # meant to put it 3 cm (x) and 4 cm (y) from over the goal: held at waypoint 2, not 3
+        waypoints = "[[0.5, 0.5, 0.1, 0.0], [0.0, 0.0, 0.0, 1.0], [0.13, 0.24, 0.2, 1.0], [0.9, 0.9, 0.2, 0.0]]"
         return {
             "suite": "mosaic", "method": "awda", "family": "stack_block", "status": "ok",
             "carry": carry, "release_xy_m": xy, "release_dz_m": None if xy is None else 0.1,
+            "waypoints": waypoints, "place_goal": "[0.1, 0.2, 0.05]",
         }  # fmt: skip
 
     rows = [episode("placed", 0.0), episode("held", None), episode("off_target", 0.2)]
@@ -130,6 +134,7 @@ def test_the_episode_record_and_the_report_table_carry_it(tmp_path: Path) -> Non
     got = table.iloc[0]
     assert got["grasped"] == 4 and got["off_target"] == 0.5 and got["held"] == 0.25
     assert got["release_xy_cm"] == pytest.approx(20.0) and got["release_dz_cm"] == 10.0
+    assert got["place_wp_xy_cm"] == pytest.approx(5.0)
     assert carry_analysis(pd.DataFrame(rows).drop(columns="carry")).empty  # an older store
 
 

@@ -151,13 +151,16 @@ def test_a_run_that_finds_the_store_made_meanwhile_uses_it(tmp_path: Path) -> No
 def test_the_carry_columns_round_trip_and_an_older_store_gains_them(
     tmp_path: Path, protocol
 ) -> None:
-    carried = replace(_record(0), carry="off_target", release_xy_m=0.1, release_dz_m=0.2)
+    carried = replace(
+        _record(0), carry="off_target", release_xy_m=0.1, release_dz_m=0.2, place_goal=[0.1, 0, 0]
+    )
     with _planned(tmp_path, protocol) as store:
         store.record(protocol.fingerprint, carried)
         row = store.episodes().iloc[0]
     assert (row["carry"], row["release_xy_m"], row["release_dz_m"]) == ("off_target", 0.1, 0.2)
+    assert row["place_goal"] == "[0.1, 0, 0]"
     conn = sqlite3.connect(tmp_path / STORE_NAME)  # as written before the carry analysis
-    for column in ("carry", "release_xy_m", "release_dz_m"):
+    for column in ("carry", "release_xy_m", "release_dz_m", "place_goal"):
         conn.execute(f"ALTER TABLE episodes DROP COLUMN {column}")
     conn.commit()
     conn.close()

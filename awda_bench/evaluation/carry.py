@@ -55,6 +55,8 @@ class CarryTally:
 
     def __init__(self, env: Any) -> None:
         self.env = env
+        self.goal: list[float] = [float(v) for v in env.place_goal()[0][0]]
+        """The place goal at the start (world xyz [m])."""
         self.release: Release | None = None
         self._free_steps = 0
         self._first_free: Release | None = None

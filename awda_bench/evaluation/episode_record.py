@@ -51,6 +51,9 @@ class EpisodeRecord:
     """Where the fingers let the target go: its horizontal distance from over its goal [m]."""
     release_dz_m: float | None = None
     """... and its height above the goal [m] (``None``: never released)."""
+    place_goal: list[float] | None = None
+    """Where the target had to go, world xyz at the start [m] (the env's ``place_goal``; ``None``
+    on a task without one): what the predicted place waypoint is measured against."""
     steps: int = 0
     """Control steps played."""
     wall_time_s: float = 0.0

@@ -13,7 +13,8 @@ rollout loop (:func:`awda_bench.rollout.roll_out`), judge it.
     first_grip     = env.grip_outcome(a_t) at the first t whose a_t closes the gripper
                      (before that step), "never" if none does, None if the task does not tell
     carry, release_xy_m, release_dz_m = what became of a grasped target on a task with a place
-                     goal (:mod:`awda_bench.evaluation.carry`), None elsewhere
+                     goal (:mod:`awda_bench.evaluation.carry`), None elsewhere; place_goal
+                     = that goal at the start
 
 Every episode starts in a freshly built scene (``reconfigure``, ~0.2 s on pick-place): PhysX
 carries contact caches and solver state from one episode of a scene into the next, and
@@ -188,6 +189,7 @@ def run_episode(
         carry=None if carry is None else carry.outcome(grasped, tally.success_once),
         release_xy_m=None if release is None else release.xy_m,
         release_dz_m=None if release is None else release.dz_m,
+        place_goal=None if carry is None else carry.goal,
         steps=end.steps,
         wall_time_s=time.perf_counter() - t_start,
         act_time_s=act_time + end.choose_s,

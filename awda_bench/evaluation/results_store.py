@@ -90,6 +90,7 @@ CREATE TABLE IF NOT EXISTS episodes (
     carry TEXT,
     release_xy_m REAL,
     release_dz_m REAL,
+    place_goal TEXT,
     steps INTEGER NOT NULL,
     wall_time_s REAL NOT NULL,
     act_time_s REAL NOT NULL,
@@ -130,6 +131,7 @@ EPISODE_COLUMNS = (
     "carry",
     "release_xy_m",
     "release_dz_m",
+    "place_goal",
     "steps",
     "wall_time_s",
     "act_time_s",
@@ -147,6 +149,7 @@ ADDED_COLUMNS: tuple[tuple[str, str, str], ...] = (
     ("episodes", "carry", "TEXT"),
     ("episodes", "release_xy_m", "REAL"),
     ("episodes", "release_dz_m", "REAL"),
+    ("episodes", "place_goal", "TEXT"),
 )
 """(table, column, type) added since schema 1 without bumping it: an older store opened to
 write gains them; one opened to read shows them as NULL."""
@@ -256,8 +259,8 @@ class ResultsStore:
     def _add_missing_columns(self) -> None:
         """A store written before a column existed gains it (NULL: unknown): ``privileged``
         (before methods declared privilege), ``first_grip`` (before the first-grip analysis),
-        ``server`` (before openpi-served policies), ``carry`` and ``release_*`` (before the carry
-        analysis)."""
+        ``server`` (before openpi-served policies), ``carry``, ``release_*`` and ``place_goal``
+        (before the carry analysis)."""
         for table, column, kind in ADDED_COLUMNS:
             columns = {r[1] for r in self._conn.execute(f"PRAGMA table_info({table})")}
             if column not in columns:
@@ -376,6 +379,7 @@ class ResultsStore:
             rec.carry,
             rec.release_xy_m,
             rec.release_dz_m,
+            None if rec.place_goal is None else json.dumps(rec.place_goal),
             rec.steps,
             rec.wall_time_s,
             rec.act_time_s,

@@ -267,16 +267,33 @@ def grasp_analysis(episodes: pd.DataFrame, metric: str) -> pd.DataFrame:
     )  # fmt: skip
 
 
+def place_waypoint_error_m(waypoints: object, place_goal: object) -> float | None:
+    """How far from over its goal a method meant to put the target [m]: the horizontal distance
+    from the stored ``place_goal`` to the last grasp-attributed waypoint (where the hand still
+    holds the target; the release follows it). None without both."""
+    if not isinstance(waypoints, str) or not waypoints or not isinstance(place_goal, str):
+        return None
+    held = [
+        p for p in json.loads(waypoints) if len(p) > GRASP_ATTRIBUTE and p[GRASP_ATTRIBUTE] > 0.5
+    ]
+    if not held:
+        return None
+    goal = json.loads(place_goal)
+    return float(np.hypot(held[-1][0] - goal[0], held[-1][1] - goal[1]))
+
+
 def carry_analysis(episodes: pd.DataFrame) -> pd.DataFrame:
     """Per (suite, method, family): what became of the grasped targets
     (:mod:`awda_bench.evaluation.carry`), over the ok episodes that recorded a ``carry``: how many
-    grasped, the share of each outcome (:data:`CARRY_OUTCOMES`) and, over those released, the
-    median distance from over the goal and height above it at the release [cm]. Empty where no
-    episode recorded one (a task without a place goal, or a store written before the analysis).
-    ``placed`` counts success_once episodes (the metric may differ)."""
+    grasped, the share of each outcome (:data:`CARRY_OUTCOMES`), over those released the median
+    distance from over the goal and height above it at the release [cm], and over those with
+    waypoints the median :func:`place_waypoint_error_m` [cm] (where the method *meant* to put it:
+    a large one says the place was misread, a small one with off-target releases that the hand
+    did not get there). Empty where no episode recorded a carry (a task without a place goal, or
+    a store written before the analysis). ``placed`` counts success_once episodes."""
     columns = [
         "suite", "method", "family", "grasped", *CARRY_OUTCOMES, "release_xy_cm",
-        "release_dz_cm",
+        "release_dz_cm", "place_wp_xy_cm",
     ]  # fmt: skip
     if "carry" not in episodes:
         return pd.DataFrame(columns=columns)
@@ -289,6 +306,12 @@ def carry_analysis(episodes: pd.DataFrame) -> pd.DataFrame:
         row |= {outcome: float((g["carry"] == outcome).mean()) for outcome in CARRY_OUTCOMES}
         for key, source in (("release_xy_cm", "release_xy_m"), ("release_dz_cm", "release_dz_m")):
             row[key] = float(released[source].median()) * 100.0 if len(released) else None
+        meant = [
+            place_waypoint_error_m(w, p)
+            for w, p in zip(g["waypoints"], g.get("place_goal", [None] * len(g)), strict=True)
+        ]
+        meant_m = [m for m in meant if m is not None]
+        row["place_wp_xy_cm"] = float(np.median(meant_m)) * 100.0 if meant_m else None
         out.append(row)
     return pd.DataFrame(out, columns=columns)
 

@@ -226,7 +226,9 @@ def _sections(read: _StoreTables, metric: str) -> list[tuple[str, str, pd.DataFr
                 "placed = success; held = never released; dropped = let go with the gripper "
                 "commanded closed; off_target / on_target = released open farther than the "
                 "task's tolerance from over its goal, or over it and still failed; release_*_cm: "
-                "median distance from over the goal and height above it at the release)",
+                "median distance from over the goal and height above it at the release; "
+                "place_wp_xy_cm: median distance from over the goal of the last grasp-attributed "
+                "waypoint, where the method meant to put it)",
                 carry.set_index("suite"),
             )
         )
