@@ -15,7 +15,13 @@ import pytest
 from awda_bench.cli import main
 from awda_bench.errors import UsageError
 from awda_bench.reporting import paper_values
-from awda_bench.reporting.aggregate import ALL, FIRST_GRIP_COLUMNS, S4_FAMILIES, mean_se
+from awda_bench.reporting.aggregate import (
+    ALL,
+    FIRST_GRIP_COLUMNS,
+    S4_FAMILIES,
+    carry_analysis,
+    mean_se,
+)
 from awda_bench.reporting.bootstrap_ci import outcomes, stratified_bootstrap_ci, stratified_mean
 from awda_bench.reporting.results_index import (
     ANALYSIS_KEYS,
@@ -24,6 +30,7 @@ from awda_bench.reporting.results_index import (
     load_missing,
 )
 from awda_bench.reporting.results_page import (
+    AFTER_THE_GRASP,
     CI,
     FIRST_GRIP,
     FULL1_GRIP,
@@ -362,6 +369,28 @@ def test_the_failure_table_counts_reached_episodes(reports: Path) -> None:
     assert row["grasped, then dropped or misplaced"] == "0.06 (6/108)"
     assert row["placed (success)"] == "0.83 (90/108)"
     assert page.no_grasp == ["MOSAIC Full-1 (drawer)"]
+    assert AFTER_THE_GRASP not in page.failures.columns  # no source has a carry.csv
+
+
+def test_a_sources_carry_csv_says_what_became_of_the_grasped_targets(reports: Path) -> None:
+    def episode(carry: str, xy: float | None) -> dict[str, object]:
+        return {
+            "suite": "pick_place", "method": "full-1-centre", "family": "pick_place",
+            "status": "ok", "carry": carry, "release_xy_m": xy, "release_dz_m": 0.02,
+            "waypoints": "[[0.1, 0.0, 0.1, 1.0], [0.4, 0.0, 0.2, 1.0]]",
+            "place_goal": "[0.3, 0.0, 0.0]",
+        }  # fmt: skip
+
+    episodes = [episode("placed", 0.01), episode("off_target", 0.15), episode("held", None)]
+    episodes.append(episode("off_target", 0.25))
+    carry_analysis(pd.DataFrame(episodes)).to_csv(reports / "learned/pp/carry.csv", index=False)
+    page = build_results_page(reports / "results_sources.toml")
+    row = page.failures.set_index("cell").loc["Full-1"]
+    assert row[AFTER_THE_GRASP] == (
+        "4 grasped: placed 0.25, on target 0.00, off target 0.50, dropped 0.00, held 0.25; "
+        "released 15.0 cm from over the goal, 2.0 cm above it; meant 10.0 cm from it"
+    )
+    assert AFTER_THE_GRASP in page.markdown()
 
 
 # --- the index and the regenerate column -------------------------------------------------------

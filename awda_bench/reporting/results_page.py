@@ -27,6 +27,7 @@ import numpy as np
 import pandas as pd
 
 from awda_bench.errors import CorruptFileError, UsageError
+from awda_bench.evaluation.carry import CARRY_OUTCOMES
 from awda_bench.evaluation.episode_specs import PROTOCOL_VERSION, protocol_drift
 from awda_bench.evaluation.methods import get_method
 from awda_bench.reporting import bootstrap_ci, tables
@@ -91,6 +92,9 @@ NOTE = "note"
 FAILURE_COLUMNS = ("missed the grasp", "grasped, then dropped or misplaced", "placed (success)")
 """The failure split's columns (fractions of the reached episodes)."""
 
+AFTER_THE_GRASP = "after the grasp (carry.csv)"
+"""The failure table's column from a source's ``carry.csv`` (printed when a source has one)."""
+
 REQUIRED_FILES = ("summary.json", "per_snapshot.csv", "grasp.csv")
 """Files a source directory must hold."""
 
@@ -111,6 +115,8 @@ class ReportDir:
     """grasp.csv."""
     per_task: pd.DataFrame | None = field(default=None, repr=False)
     """per_task.csv (``None``: a source written without one)."""
+    carry: pd.DataFrame | None = field(default=None, repr=False)
+    """carry.csv (``None``: no episode of the source recorded a carry)."""
     protocols: dict[str, dict[str, Any]] = field(default_factory=dict)
     """summary.json's evaluation protocols by suite (definition and fingerprint)."""
 
@@ -149,6 +155,7 @@ def read_report_dir(directory: Path, where: str) -> ReportDir:
             if (directory / "per_task.csv").is_file()
             else None
         ),
+        carry=pd.read_csv(directory / "carry.csv") if (directory / "carry.csv").is_file() else None,
         protocols=protocols,
     )
 
@@ -493,8 +500,20 @@ class ResultsPage:
             "rates times the episodes. A row covers every episode of the label in its source (for "
             "a held-out family: that family).",
             "",
-            tables.to_markdown(self.failures),
         ]
+        if AFTER_THE_GRASP in self.failures.columns:
+            lines += [
+                f"{AFTER_THE_GRASP}: from the episode records (`awda_bench/evaluation/carry.py`), "
+                "what became of the grasped targets: the shares of placed (success), held "
+                "(never let go), dropped (let go with the gripper commanded closed), off target / "
+                "on target (released open farther than the task's tolerance from over its goal, "
+                "or over it and still failed); the median release point, and the median "
+                "distance from over the goal of the last grasp-attributed predicted waypoint "
+                f"(where the method meant to put it). {NOT_RECORDED}: evaluated before the "
+                "analysis (2026-12-06).",
+                "",
+            ]
+        lines.append(tables.to_markdown(self.failures))
         if self.no_grasp:
             lines += [
                 "No grasp flags (their tasks have no grasp target): " + "; ".join(self.no_grasp),
@@ -869,10 +888,42 @@ class _Builder:
                     f"({_count(grasped - success, n)}/{n_reached})",
                     "placed (success)": f"{split.placed:.2f} ({_count(success, n)}/{n_reached})",
                 }
+            carry = self.after_the_grasp(entry)
+            if carry is not None:
+                row[AFTER_THE_GRASP] = carry
             rows.append(row)
             index.append(SUITE_TITLES[entry.suite])
         columns = ["cell", SOURCE, "episodes with a grasp target", "reached", *FAILURE_COLUMNS]
+        if any(AFTER_THE_GRASP in row for row in rows):
+            columns.append(AFTER_THE_GRASP)
+            rows = [{AFTER_THE_GRASP: NOT_RECORDED, **row} for row in rows]
         return pd.DataFrame(rows, index=pd.Index(index, name="suite"), columns=columns), no_grasp
+
+    def after_the_grasp(self, entry: SourceEntry) -> str | None:
+        """What became of the entry's grasped targets, from its source's carry.csv (the carry
+        analysis' outcome shares over the grasped episodes, the median release point and where
+        the method meant to put the target), or ``None`` where the source has no such row."""
+        carry = self.report(entry).carry
+        if carry is None:
+            return None
+        match = carry[(carry["suite"] == entry.suite) & (carry["method"] == entry.label)]
+        if entry.family is not None:
+            match = match[match["family"] == entry.family]
+        if match.empty:
+            return None
+        r = match.iloc[0]
+        shares = ", ".join(
+            f"{name.replace('_', ' ')} {float(r[name]):.2f}" for name in CARRY_OUTCOMES
+        )
+        text = f"{int(r['grasped'])} grasped: {shares}"
+        if not pd.isna(r["release_xy_cm"]):
+            text += (
+                f"; released {float(r['release_xy_cm']):.1f} cm from over the goal, "
+                f"{float(r['release_dz_cm']):.1f} cm above it"
+            )
+        if not pd.isna(r["place_wp_xy_cm"]):
+            text += f"; meant {float(r['place_wp_xy_cm']):.1f} cm from it"
+        return text
 
     def sources(self) -> pd.DataFrame:
         by_dir: dict[str, list[SourceEntry]] = {}
