@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -419,6 +420,7 @@ def _fake_episode(job, success: bool):
         truth={"grasp": np.zeros(T, bool)},
         meta={
             "episode_seed": job.seed,
+            "attempt": job.attempt,
             "elapsed_steps": T,
             "success": success,
             "code_sha256": "0" * 64,  # "older code" than the tree's
@@ -511,6 +513,61 @@ def test_chunks_replay_the_units_history(tmp_path: Path) -> None:
     assert runner.played == [("agent", 0), ("agent", 1), ("agent", 2), ("agent", 3)]
     # every chunk starts in a fresh env and replays the unit's earlier attempts in order
     assert runner.replayed == [("agent", 0), ("agent", 0), ("agent", 1), ("agent", 2)]
+
+
+def _unit_contents(root: Path) -> tuple[dict, dict[str, list]]:
+    """A finished unit's JSON and its arrays (JPEG frames as bytes), traj by traj."""
+    meta = json.loads((root / "agent/pick_place/task_00.json").read_text())
+    arrays: dict[str, list] = {}
+
+    def read(key: str, obj: object) -> None:
+        if isinstance(obj, h5py.Dataset):
+            values = obj[()]
+            arrays[key] = [bytes(v) for v in values] if obj.dtype.kind == "O" else values.tolist()
+
+    with h5py.File(root / "agent/pick_place/task_00.h5", "r") as f:
+        f.visititems(read)
+    return meta, arrays
+
+
+def test_a_larger_collection_extends_a_finished_smaller_one(tmp_path: Path) -> None:
+    small = tmp_path / "small"
+    assert run_collect(_fake_config(small, episodes_per_task=2), runner=FakeRunner(fail={1}))
+    four = {"episodes_per_task": 4}
+    fresh = run_collect(_fake_config(tmp_path / "fresh", **four), runner=FakeRunner(fail={1, 4}))
+    runner = FakeRunner(fail={1, 4})
+    big = run_collect(_fake_config(tmp_path / "big", extend_from=small, **four), runner=runner)
+    # attempts 0 and 2 kept, 1 discarded in the small one: only 3, 4 (failed) and 5 are recorded
+    assert big.complete and big.extended == 2 and big.already == 2 and big.kept == 2
+    assert runner.replayed == [("agent", 0), ("agent", 1), ("agent", 2)]
+    assert runner.played == [("agent", 3), ("agent", 4), ("agent", 5)]
+    assert fresh.complete and _unit_contents(tmp_path / "big") == _unit_contents(tmp_path / "fresh")
+    manifest = json.loads((tmp_path / "big" / MANIFEST).read_text())
+    assert manifest["fingerprint"] == make_plan(_fake_config(tmp_path, **four)).fingerprint
+    # done: a re-run seeds and records nothing
+    again = run_collect(_fake_config(tmp_path / "big", extend_from=small, **four), FakeRunner())
+    assert again.extended == 0 and again.kept == 0 and again.already == 4
+
+
+def test_an_extension_only_from_a_finished_smaller_collection_of_the_same_options(
+    tmp_path: Path,
+) -> None:
+    small = tmp_path / "small"
+    run_collect(_fake_config(small, episodes_per_task=2), runner=FakeRunner())
+    unfinished = tmp_path / "unfinished"
+    run_collect(_fake_config(unfinished, episodes_per_task=2), runner=FakeRunner(error={1}))
+    cases = {
+        "differs in seed": _fake_config(tmp_path / "a", seed=3, extend_from=small),
+        "holds more than this collection plans (episodes_per_task 2 > 1)": _fake_config(
+            tmp_path / "b", episodes_per_task=1, extend_from=small
+        ),
+        "that collection is unfinished": _fake_config(tmp_path / "c", extend_from=unfinished),
+        "no manifest.json there": _fake_config(tmp_path / "d", extend_from=tmp_path / "none"),
+    }
+    for needle, config in cases.items():
+        with pytest.raises(UsageError, match=re.escape(needle)):
+            run_collect(config, runner=FakeRunner())
+        assert not config.out.exists()  # refused before anything is written
 
 
 def test_a_task_the_expert_always_fails_gives_up(tmp_path: Path) -> None:

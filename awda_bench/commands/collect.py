@@ -44,6 +44,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         help="successful episodes kept per task and embodiment (default 20; reference 100)",
     )
     parser.add_argument("--out", type=Path, required=True, help="DATA_DIR")
+    parser.add_argument(
+        "--extend-from",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="a finished collection made with the same options and fewer episodes: its episodes "
+        "are this one's first (the same seeds), only the rest is recorded",
+    )
     add_backend_args(parser)
     parser.add_argument(
         "--image-size",
@@ -103,6 +111,7 @@ def config_from_args(args: argparse.Namespace) -> CollectConfig:
         chunk_episodes=args.chunk_episodes,
         suites_dir=args.tasks_dir,
         progress=not args.no_progress,
+        extend_from=args.extend_from,
     )
 
 
@@ -115,9 +124,10 @@ def run(args: argparse.Namespace) -> int:
     rate = (result.kept + result.discarded) / minutes if minutes > 0 else 0.0
     fps = result.frames / result.wall_s if result.wall_s > 0 else 0.0
     per_episode = result.bytes_kept / result.kept if result.kept else 0
+    extended = f" ({result.extended} from {config.extend_from})" if result.extended else ""
     print(
-        f"{config.out}: {result.planned} episodes planned, {result.already} already kept, "
-        f"{result.kept} kept and {result.discarded} discarded now ({result.errors} errors) in "
+        f"{config.out}: {result.planned} episodes planned, {result.already} already kept"
+        f"{extended}, {result.kept} kept and {result.discarded} discarded now ({result.errors} errors) in "
         f"{result.wall_s:.1f} s: {rate:.1f} episodes/min, {result.steps} steps, "
         f"{result.frames} frames ({fps:.1f} frames/s; rendering+JPEG {result.render_s:.1f} s "
         f"of {result.episode_s:.1f} s episode time), {per_episode / 1e6:.2f} MB/episode; "

@@ -27,6 +27,7 @@ from typing import Any
 from tqdm import tqdm
 
 from awda_bench.data.config import ROLE_SYNTHESIZED, CollectConfig
+from awda_bench.data.extend import check_extension, extend_collection
 from awda_bench.data.plan import CollectJob, CollectPlan, Unit, code_sha256, make_plan
 from awda_bench.data.pool import InlineRunner, JobResult, JobRunner, ProcessRunner
 from awda_bench.data.trajectory_file import (
@@ -81,6 +82,8 @@ class CollectResult:
     """Bytes of the shards this call kept."""
     complete: bool = False
     """Every unit is finished."""
+    extended: int = 0
+    """Episodes this call took from ``config.extend_from`` (counted in :attr:`already`)."""
     warnings: list[str] = field(default_factory=list)
     """Things the user should know (e.g. a collection resumed under changed code)."""
 
@@ -213,6 +216,10 @@ def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> Colle
     root = config.out
     previous_code = check_data_dir(root, plan)
     result = CollectResult(planned=sum(u.planned for u in plan.units))
+    if config.extend_from is not None:
+        check_extension(config.extend_from, plan)  # refused: nothing written
+        _start_manifest(root, plan, previous_code)  # a kill while seeding leaves a collect dir
+        result.extended = extend_collection(config.extend_from, plan, root)
     states: dict[tuple[str, int], _UnitState] = {}
     jobs: list[CollectJob] = []
     finished: list[_UnitState] = []  # every attempt recorded, killed before consolidation
@@ -229,14 +236,7 @@ def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> Colle
         else:
             jobs.append(state.job(plan, config))
 
-    try:
-        root.mkdir(parents=True, exist_ok=True)
-        write_json(root / MANIFEST, _manifest(plan, [], complete=False, code=previous_code))
-    except OSError as exc:
-        raise UsageError(
-            f"cannot write to --out {root} ({exc.strerror or exc}); fix its permissions or "
-            "choose another directory"
-        ) from exc
+    _start_manifest(root, plan, previous_code)
     for state in finished:
         _consolidate(root, plan, state)
 
@@ -322,6 +322,18 @@ def run_collect(config: CollectConfig, runner: JobRunner | None = None) -> Colle
         result.wall_s = time.perf_counter() - t0
         result.complete = _write_final_manifest(root, plan)
     return result
+
+
+def _start_manifest(root: Path, plan: CollectPlan, previous_code: list[str]) -> None:
+    """The manifest of an unfinished collection (the directory is ``collect``'s from then on)."""
+    try:
+        root.mkdir(parents=True, exist_ok=True)
+        write_json(root / MANIFEST, _manifest(plan, [], complete=False, code=previous_code))
+    except OSError as exc:
+        raise UsageError(
+            f"cannot write to --out {root} ({exc.strerror or exc}); fix its permissions or "
+            "choose another directory"
+        ) from exc
 
 
 def _consolidate(root: Path, plan: CollectPlan, state: _UnitState) -> None:

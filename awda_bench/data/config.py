@@ -168,6 +168,9 @@ class CollectConfig:
     """Where suite files live."""
     progress: bool = True
     """Show a progress bar on stderr."""
+    extend_from: Path | None = None
+    """A finished collection of the same options and fewer episodes whose episodes this one
+    starts from (:mod:`awda_bench.data.extend`); not part of the dataset's definition."""
 
     def __post_init__(self) -> None:
         if self.split not in SPLITS:
