@@ -61,8 +61,8 @@ def _source_definition(source: Path) -> dict[str, Any]:
     return definition
 
 
-def check_extension(source: Path, plan: CollectPlan) -> dict[str, Any]:
-    """The source's definition, after checking ``plan`` is the same collection made larger."""
+def check_extension(source: Path, plan: CollectPlan) -> None:
+    """Refuse (one line) a source that is not ``plan``'s collection made smaller and finished."""
     theirs = _source_definition(source)
     ours = plan.definition
     differ = sorted(
@@ -82,7 +82,6 @@ def check_extension(source: Path, plan: CollectPlan) -> dict[str, Any]:
             f"({', '.join(f'{k} {theirs[k]} > {ours[k]}' for k in smaller)}); plan at least as "
             "many"
         )
-    return theirs
 
 
 def _split_unit(source: Path, out: Path, unit_name: str) -> int:
@@ -111,8 +110,8 @@ def _split_unit(source: Path, out: Path, unit_name: str) -> int:
 def extend_collection(source: Path, plan: CollectPlan, out: Path) -> int:
     """Seed ``out`` (the collection ``plan`` describes) with ``source``'s episodes: every unit
     that has nothing in ``out`` yet and is finished in ``source``. Returns the episodes seeded (0
-    on a re-run: what was seeded then is ``out``'s own now)."""
-    check_extension(source, plan)
+    on a re-run: what was seeded then is ``out``'s own now). The caller has run
+    :func:`check_extension` (``run_collect`` does, before it writes anything)."""
     seeded = 0
     for unit in plan.units:
         if unit_is_complete(out, unit.name, unit.planned):
