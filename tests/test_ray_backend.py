@@ -245,6 +245,43 @@ def test_without_ray_the_ray_backend_is_refused_with_an_install_hint(
     assert not out.exists()
 
 
+class _HangingRay:
+    """A ``ray`` module whose ``init`` never returns (as when a raylet never reaches its GCS)."""
+
+    __version__ = "0"
+
+    def __init__(self) -> None:
+        self.shutdowns = 0
+
+    def is_initialized(self) -> bool:
+        return False
+
+    def init(self, **_kwargs) -> None:
+        time.sleep(60)
+
+    def shutdown(self) -> None:
+        self.shutdowns += 1
+
+
+def test_a_ray_init_that_hangs_is_a_one_line_error_after_the_limit(
+    tmp_path: Path, suites: Path, monkeypatch, capsys
+) -> None:
+    monkeypatch.setitem(sys.modules, "ray", _HangingRay())
+    monkeypatch.setenv("AWDA_RAY_INIT_TIMEOUT_S", "0.5")
+    previous = signal.getsignal(signal.SIGALRM)
+    out = tmp_path / "run"
+    t0 = time.perf_counter()
+    assert run_fake_suite(suites, out, "--method", f"{FAKES}:SkillPolicy", "--backend", "ray") == 2
+    assert time.perf_counter() - t0 < 20
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert err.startswith("error: Ray did not start within 0.5 s"), err
+    assert "ray stop" in err and "AWDA_RAY_INIT_TIMEOUT_S" in err
+    assert signal.getsignal(signal.SIGALRM) is previous  # the alarm is put back
+    assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
+    assert not out.exists()
+
+
 def test_bad_backend_options_are_one_line_errors(tmp_path: Path, suites: Path, capsys) -> None:
     out = tmp_path / "run"
     cases = [

@@ -42,8 +42,10 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import socket
 import sys
+import threading
 import time
 import traceback
 from collections import Counter, deque
@@ -81,6 +83,44 @@ AUTH_HINT = (
 
 CLOSE_TIMEOUT_S = 30.0
 """Time actors get to close their envs at the end of a run before they are killed [s]."""
+
+INIT_TIMEOUT_S = 300.0
+"""``ray.init`` that has not returned within this long is given up with a one-line error
+(``AWDA_RAY_INIT_TIMEOUT_S`` overrides it) [s]. A private instance starts in ~6 s on the 2-core
+machine under load; once, under a CI run and a collection together, its raylet never reached its
+GCS and ``ray.init`` waited without end (a test hung 15+ minutes)."""
+
+
+class _InitTimeout(Exception):
+    """Raised in the main thread by :func:`init_within`'s alarm."""
+
+
+def init_within(ray: ModuleType, kwargs: dict[str, Any], timeout_s: float) -> None:
+    """``ray.init(**kwargs)``, interrupted by ``SIGALRM`` after ``timeout_s`` (a one-line
+    :class:`UsageError`). Only the main thread can take the alarm; elsewhere (a caller's thread)
+    the call is not bounded. Not done in a helper thread: Ray started from a thread that is not
+    the main one loses its GCS connection after 60 s (measured with Ray 2.60)."""
+    if threading.current_thread() is not threading.main_thread() or timeout_s <= 0:
+        ray.init(**kwargs)
+        return
+
+    def alarm(_signum: int, _frame: Any) -> None:
+        raise _InitTimeout
+
+    previous = signal.signal(signal.SIGALRM, alarm)
+    signal.setitimer(signal.ITIMER_REAL, timeout_s)
+    try:
+        ray.init(**kwargs)
+    except _InitTimeout:
+        if ray.is_initialized():
+            ray.shutdown()
+        raise UsageError(
+            f"Ray did not start within {timeout_s:g} s (its processes may be stuck: run "
+            "`ray stop`, then try again; AWDA_RAY_INIT_TIMEOUT_S sets the limit)"
+        ) from None
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def check_reachable(address: str) -> None:
@@ -233,7 +273,9 @@ class RayActorPool(JobPool[J, R]):
                 check_reachable(self.address)
                 kwargs.update(address=self.address)
             try:
-                ray.init(**kwargs)
+                init_within(
+                    ray, kwargs, float(os.environ.get("AWDA_RAY_INIT_TIMEOUT_S", INIT_TIMEOUT_S))
+                )
             except (ConnectionError, ValueError, RuntimeError) as exc:
                 where = "a private local instance" if self.address is None else self.address
                 first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
