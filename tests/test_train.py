@@ -4,11 +4,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
 import torch
 
+from awda_bench.errors import CorruptFileError
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig, TrainConfig, TrunkConfig
-from awda_bench.models.snapshot import list_snapshots
+from awda_bench.models.snapshot import list_snapshots, load_snapshot
 from awda_bench.models.synthetic import SyntheticWaypointDataset
 from awda_bench.training.loop import batch_indices, resolve_device, train
 
@@ -56,3 +58,47 @@ def test_resume_continues_the_same_loss_curve(tmp_path: Path) -> None:
 def test_device_auto_picks_what_exists() -> None:
     expected = "cuda" if torch.cuda.is_available() else "cpu"
     assert resolve_device("auto").type == expected
+
+
+def test_ema_snapshots_hold_the_average_and_resume_bit_identically(tmp_path: Path) -> None:
+    data = SyntheticWaypointDataset(6, height_px=64, width_px=64, demo_frames=1)
+    cfg = TrainConfig(
+        batch_size=2, max_steps=4, snapshot_every_steps=2, seed=3, device="cpu", ema_decay=0.5
+    )
+    # the average by hand: the first step's weights, then ema = 0.5 ema + 0.5 w after each step
+    plain = TrainConfig(**{**cfg.__dict__, "ema_decay": 0.0, "snapshot_every_steps": 1})
+    train(_model(0), data, plain, tmp_path / "plain")
+    steps = [load_snapshot(p).model_state for p in list_snapshots(tmp_path / "plain")]
+    expected = {k: v.clone() for k, v in steps[0].items()}
+    for state in steps[1:]:
+        for k, v in state.items():
+            if v.is_floating_point():
+                expected[k] = 0.5 * expected[k] + 0.5 * v
+    full = train(_model(0), data, cfg, tmp_path / "full")
+    last = load_snapshot(list_snapshots(tmp_path / "full")[-1])
+    assert last.training_state is not None
+    moved = 0
+    for k, v in last.model_state.items():
+        if v.is_floating_point():
+            torch.testing.assert_close(v, expected[k], rtol=1e-5, atol=1e-6)
+            torch.testing.assert_close(last.training_state[k], steps[-1][k], rtol=0, atol=0)
+            moved += int(not torch.equal(v, steps[-1][k]))
+    assert moved > 0  # the average is not the last weights
+
+    first = train(
+        _model(0), data, TrainConfig(**{**cfg.__dict__, "max_steps": 2}), tmp_path / "split"
+    )
+    resumed = train(_model(99), data, cfg, tmp_path / "split")
+    assert first.losses + resumed.losses == full.losses
+    again = load_snapshot(list_snapshots(tmp_path / "split")[-1])
+    assert again.training_state is not None
+    for k, v in last.model_state.items():
+        assert torch.equal(v, again.model_state[k]) and torch.equal(
+            last.training_state[k], again.training_state[k]
+        )
+    with pytest.raises(CorruptFileError, match="holds a moving average"):
+        train(
+            _model(0), data, TrainConfig(**{**plain.__dict__, "max_steps": 6}), tmp_path / "split"
+        )
+    with pytest.raises(CorruptFileError, match="holds raw weights"):
+        train(_model(0), data, TrainConfig(**{**cfg.__dict__, "max_steps": 6}), tmp_path / "plain")

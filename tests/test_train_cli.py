@@ -281,6 +281,31 @@ def test_every_column_trains_20_steps_into_loadable_snapshots(
     data.close()
 
 
+def test_an_ema_recipe_snapshots_the_average_and_the_policy_plays_it(
+    tiny: Path, recipe: Path, tmp_path: Path
+) -> None:
+    from awda_bench.policies.awda_policy import AwdaPolicy
+
+    ema = recipe.parent / "tiny-ema.toml"
+    ema.write_text(f'extends = "{recipe.name}"\nname = "tiny-ema"\n[train]\nema_decay = 0.9\n')
+    out = tmp_path / "ckpt"
+    args = ["--method", "awda", "--data", str(tiny), "--out", str(out), "--recipe", str(ema)]
+    assert _train(*args, "--steps", "4", "--snapshot-every", "2") == 0
+    snap = load_snapshot(list_snapshots(out)[-1])
+    assert snap.training is not None and snap.training["recipe"]["train"]["ema_decay"] == 0.9
+    assert snap.training_state is not None
+    assert any(not torch.equal(v, snap.training_state[k]) for k, v in snap.model_state.items())
+    policy = AwdaPolicy(list_snapshots(out)[-1])  # plays the average
+    for k, v in policy.model.state_dict().items():
+        assert torch.equal(v, snap.model_state[k])
+    assert _train(*args, "--steps", "6", "--snapshot-every", "2") == 0  # resumes from step 4
+    assert load_snapshot(list_snapshots(out)[-1]).step == 6
+    bad = recipe.parent / "tiny-ema-bad.toml"
+    bad.write_text(f'extends = "{recipe.name}"\nname = "bad"\n[train]\nema_decay = 1.0\n')
+    with pytest.raises(UsageError, match="ema_decay"):
+        load_recipe(str(bad))
+
+
 @pytest.mark.slow
 def test_resume_after_a_kill_continues_the_identical_curve(
     tiny: Path, recipe: Path, tmp_path: Path

@@ -513,6 +513,9 @@ class TrainConfig:
     """``auto`` (CUDA when available), ``cpu`` or ``cuda``."""
     resume: bool = True
     """Continue from the latest snapshot in the snapshot directory when there is one."""
+    ema_decay: float = 0.0
+    """Snapshots hold an exponential moving average of the weights with this decay (0: the
+    weights themselves; :func:`awda_bench.training.loop.train`)."""
 
     def __post_init__(self) -> None:
         o = "TrainConfig"

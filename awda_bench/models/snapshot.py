@@ -147,6 +147,9 @@ class Snapshot:
     """The training config as a dict, if saved."""
     training: dict[str, Any] | None = None
     """What the run trained on and how (the ``train`` command's record), if saved."""
+    training_state: dict[str, torch.Tensor] | None = None
+    """The raw weights the optimizer steps, when :attr:`model_state` holds their moving average
+    (``[train] ema_decay``); what resuming continues from. ``None``: :attr:`model_state` is both."""
 
     def build_model(self, device: torch.device | str = "cpu") -> nn.Module:
         """A model of this architecture with the snapshot's weights, in eval mode, on ``device``.
@@ -166,17 +169,20 @@ def save_snapshot(
     optimizer: torch.optim.Optimizer | None = None,
     train_config: object | None = None,
     training: dict[str, Any] | None = None,
+    averaged: nn.Module | None = None,
 ) -> Path:
     """Write ``model`` (+ optimizer, step, RNG states) to ``path`` atomically (temp + rename).
 
-    ``training``: plain-data record of the run (str/int/float/bool/None, lists, dicts)."""
+    ``training``: plain-data record of the run (str/int/float/bool/None, lists, dicts).
+    ``averaged``: a moving average of ``model`` (the same architecture): its weights become the
+    snapshot's model (what evaluation plays) and ``model``'s are kept to resume training."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     payload = {
         "format_version": FORMAT_VERSION,
         "arch": arch_of(model),
         "config": config_to_dict(model.config),
-        "model_state": model.state_dict(),
+        "model_state": (averaged if averaged is not None else model).state_dict(),
         "optimizer_state": optimizer.state_dict() if optimizer is not None else None,
         "step": int(step),
         "rng_state": capture_rng_state(),
@@ -184,6 +190,8 @@ def save_snapshot(
     }
     if training is not None:
         payload["training"] = training
+    if averaged is not None:
+        payload["training_state"] = model.state_dict()
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     torch.save(payload, tmp)
     os.replace(tmp, path)
@@ -234,6 +242,7 @@ def load_snapshot(path: Path | str) -> Snapshot:
         rng_state=raw["rng_state"],
         train_config=raw.get("train_config"),
         training=raw.get("training"),
+        training_state=raw.get("training_state"),
     )
 
 

@@ -25,9 +25,10 @@ from typing import Any, Protocol
 
 import numpy as np
 import torch
+from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torch.utils.data import default_collate
 
-from awda_bench.errors import UsageError
+from awda_bench.errors import CorruptFileError, UsageError
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import TrainConfig
 from awda_bench.models.snapshot import (
@@ -94,6 +95,12 @@ def _seed_everything(seed: int) -> None:
     random.seed(seed)
 
 
+def moving_average(model: AwdaNet | TosviNet, decay: float) -> AveragedModel:
+    """An exponential moving average of ``model``'s weights and buffers (PyTorch's
+    ``AveragedModel``; the first update copies the weights). ``.module`` is the averaged model."""
+    return AveragedModel(model, multi_avg_fn=get_ema_multi_avg_fn(decay), use_buffers=True)
+
+
 BatchTransform = Callable[[dict[str, Any], int], dict[str, Any]]
 """``transform(batch, step) -> batch``: training-time data treatment of the collated batch taken at
 ``step`` (0-based), already on the device. It must draw its randomness from ``(seed, step)``
@@ -111,6 +118,7 @@ def train(
     on_snapshot: Callable[[int, Path], None] | None = None,
     training_record: dict[str, Any] | None = None,
     on_start: Callable[[int], None] | None = None,
+    averaged: AveragedModel | None = None,
 ) -> TrainResult:
     """Train ``model`` in place up to ``config.max_steps``, writing snapshots to ``snapshot_dir``.
 
@@ -121,6 +129,10 @@ def train(
     and treating the batch) and ``compute_s`` (forward, backward, optimizer) [s];
     ``on_snapshot(step, path)`` after each snapshot is written. ``transform`` is applied to every
     collated batch (:data:`BatchTransform`); ``training_record`` is stored in every snapshot.
+
+    With ``config.ema_decay`` > 0 the snapshots hold a moving average of the weights
+    (:func:`moving_average`, updated after every step; pass ``averaged`` to read it during
+    training, e.g. to validate it), and the raw weights beside it to resume.
     """
     if len(dataset) == 0:
         raise UsageError("the training dataset is empty")
@@ -131,10 +143,24 @@ def train(
     trainable = [p for p in model.parameters() if p.requires_grad]
     optimizer = torch.optim.Adam(trainable, lr=config.learning_rate)
     result = TrainResult(start_step=0, end_step=0)
+    if config.ema_decay > 0 and averaged is None:
+        averaged = moving_average(model, config.ema_decay)
+    if averaged is not None:
+        averaged.to(device)
     existing = list_snapshots(snapshot_dir) if config.resume else []
     if existing:
         snapshot = load_snapshot(existing[-1])
         restore(model, snapshot, optimizer, rng=True)
+        if (averaged is not None) != (snapshot.training_state is not None):
+            held = "a moving average" if snapshot.training_state is not None else "raw weights"
+            raise CorruptFileError(
+                f"{snapshot.path} holds {held}, which this run (ema_decay {config.ema_decay}) "
+                "cannot resume; train into a new directory"
+            )
+        if averaged is not None and snapshot.training_state is not None:
+            averaged.module.load_state_dict(snapshot.model_state)
+            averaged.n_averaged.fill_(snapshot.step)
+            model.load_state_dict(snapshot.training_state)
         result.start_step = snapshot.step
         result.resumed_from = snapshot.path
     else:
@@ -155,6 +181,8 @@ def train(
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
+        if averaged is not None:
+            averaged.update_parameters(model)
         step += 1
         result.losses.append(info["loss"])
         if on_step is not None:
@@ -170,6 +198,7 @@ def train(
                 optimizer=optimizer,
                 train_config=config,
                 training=training_record,
+                averaged=averaged.module if averaged is not None else None,
             )
             result.snapshots.append(path)
             if on_snapshot is not None:

@@ -129,6 +129,11 @@ class TrainRecipe:
     """Batches of held-out pairs per validation (a fixed subset, the same every time)."""
     seed: int = 0
     """Batch order, ADM and augmentation draws, and the initial weights."""
+    ema_decay: float = 0.0
+    """Exponential moving average of the weights (``torch.optim.swa_utils``, as diffusion_policy
+    keeps one): each step ``ema = decay * ema + (1 - decay) * weights``, and snapshots, validation
+    and evaluation use the average (the raw weights stay in the snapshot to resume). 0: off, as
+    in the reference. 0.995 averages over ~200 steps."""
 
     def __post_init__(self) -> None:
         o = "recipe train"
@@ -142,6 +147,7 @@ class TrainRecipe:
             check_field(getattr(self, name) >= 1, o, name, getattr(self, name), "an int >= 1")
         check_field(self.learning_rate > 0, o, "learning_rate", self.learning_rate, "a float > 0")
         check_field(self.seed >= 0, o, "seed", self.seed, "an int >= 0")
+        check_field(0.0 <= self.ema_decay < 1.0, o, "ema_decay", self.ema_decay, "in [0, 1)")
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ import json
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import torch
 from torch.utils.data import default_collate
@@ -56,7 +56,13 @@ from awda_bench.training.feature_datasets import (
     tosvi_frames_needed,
 )
 from awda_bench.training.logbook import Logbook, plot_learning_curve
-from awda_bench.training.loop import SampleDataset, TrainResult, resolve_device, train
+from awda_bench.training.loop import (
+    SampleDataset,
+    TrainResult,
+    moving_average,
+    resolve_device,
+    train,
+)
 from awda_bench.training.recipe import (
     AWDA_ONLY_FIELDS,
     TOSVI_ONLY_FIELDS,
@@ -680,7 +686,9 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
         seed=t.seed,
         device=request.device,
         resume=resuming,
+        ema_decay=t.ema_decay,
     )
+    averaged = moving_average(model, t.ema_decay) if t.ema_decay > 0 else None
     val_dataset = samples.val_dataset
     validator = (
         Validator(
@@ -695,7 +703,9 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
     outcome = TrainOutcome(column=column, recipe=recipe, result=TrainResult(0, 0), out=request.out)
     title = f"{column.name} ({column.slug}), recipe {recipe.name}, data {sources.data.fingerprint}"
     title += f", hold-out {request.hold_out}" if request.hold_out else ""
-    progress = _Progress(request, column, recipe, model, validator, device, outcome, title)
+    # what the snapshots hold, and so what is validated
+    validated = cast(AwdaNet | TosviNet, averaged.module) if averaged is not None else model
+    progress = _Progress(request, column, recipe, validated, validator, device, outcome, title)
     try:
         outcome.result = train(
             model,
@@ -707,6 +717,7 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
             on_snapshot=progress.on_snapshot,
             transform=BatchTreatment(recipe.augment, adm=column.adm, seed=t.seed),
             training_record=record,
+            averaged=averaged,
         )
     finally:
         progress.close()
