@@ -32,6 +32,7 @@ from awda_bench.reproduce.stages import (
     stage_totals,
     write_stage_times,
 )
+from awda_bench.training.recipe import load_recipe
 
 
 def _plan(out: Path, **kw) -> dict[str, object]:
@@ -661,3 +662,18 @@ def test_a_resumed_plan_estimates_only_what_is_left(tmp_path: Path) -> None:
     assert again.detail == "1040 episodes, 1037 left"  # type: ignore[attr-defined]
     # planning only reads: the temporary file of a collection that may still be running stays
     assert (shards / ".a00003.h5.tmp").is_file()
+
+
+def test_a_recipes_suite_train_table_sets_the_steps_reproduce_plans(tmp_path: Path) -> None:
+    recipe = tmp_path / "steps.toml"
+    base = Path(load_recipe("small-scratch").path or "")
+    recipe.write_text(
+        f'extends = "{base}"\nname = "steps"\n[suite.pick_place.train]\nmax_steps = 123\n'
+    )
+    train = _plan(tmp_path / "a", columns=("full-1",), recipe=str(recipe))["train full-1"]
+    argv = train.argv  # type: ignore[attr-defined]
+    assert "123 steps" in train.detail  # type: ignore[attr-defined]
+    assert "--steps" not in argv  # train reads the same table
+    assert load_recipe(str(recipe)).for_suite("pick_place").train.max_steps == 123
+    forced = _plan(tmp_path / "b", columns=("full-1",), recipe=str(recipe), steps=40)
+    assert "40 steps" in forced["train full-1"].detail  # type: ignore[attr-defined]

@@ -23,7 +23,7 @@ from awda_bench.models.snapshot import list_snapshots, load_snapshot
 from awda_bench.training.augment import BatchTreatment, step_generator
 from awda_bench.training.columns import ABLATIONS, COLUMNS, TRAINABLE, column_for
 from awda_bench.training.logbook import read_metrics
-from awda_bench.training.recipe import AugmentRecipe, load_recipe
+from awda_bench.training.recipe import AugmentRecipe, TrainRecipe, load_recipe
 
 TINY_RECIPE = """
 name = "tiny"
@@ -120,6 +120,30 @@ def test_a_variant_extends_its_base_and_overrides_only_what_it_names(tmp_path: P
     leaf = load_recipe(str(tmp_path / "leaf.toml"))
     assert (leaf.name, leaf.model.trunk.dropout, leaf.train.seed) == ("leaf", 0.3, 5)
     assert leaf.suite_models == {"metaworld": {"image_height_px": 224, "image_width_px": 200}}
+    # a [suite.*.train] table: that suite's schedule, inherited beside a variant's own model table
+    (tmp_path / "steps.toml").write_text(
+        'extends = "base.toml"\nname = "steps"\n[suite.metaworld.train]\nmax_steps = 6000\n'
+    )
+    (tmp_path / "steps-leaf.toml").write_text(
+        'extends = "steps.toml"\nname = "steps-leaf"\n[suite.metaworld.model]\ndropout = 0.2\n'
+    )
+    steps = load_recipe(str(tmp_path / "steps-leaf.toml"))
+    on_mw, on_pp = steps.for_suite("metaworld"), steps.for_suite("pick_place")
+    assert (on_mw.train.max_steps, on_pp.train.max_steps) == (6000, TrainRecipe().max_steps)
+    assert (on_mw.model.trunk.image_height_px, on_mw.model.trunk.dropout) == (224, 0.2)
+    assert on_mw.with_schedule(50, None).train.max_steps == 50  # --steps wins
+    assert "suite_trains" in steps.to_dict() and "suite_trains" not in on_mw.to_dict()
+    assert "suite_trains" not in load_recipe(str(tmp_path / "leaf.toml")).to_dict()
+    (tmp_path / "bad-steps.toml").write_text(
+        'extends = "base.toml"\nname = "bad"\n[suite.metaworld.train]\nmax_step = 6000\n'
+    )
+    with pytest.raises(UsageError, match="max_step"):
+        load_recipe(str(tmp_path / "bad-steps.toml"))
+    (tmp_path / "bad-table.toml").write_text(
+        'extends = "base.toml"\nname = "bad"\n[suite.metaworld.augment]\nshift_px = 0\n'
+    )
+    with pytest.raises(UsageError, match=r"only \[suite.<name>.model\] and"):
+        load_recipe(str(tmp_path / "bad-table.toml"))
     # a missing base, a cycle and a nameless variant are one-line errors
     (tmp_path / "lost.toml").write_text('extends = "nowhere"\nname = "lost"\n')
     with pytest.raises(UsageError, match="extends 'nowhere', which does not exist"):

@@ -65,10 +65,11 @@ def _collection_done(path: Path, split: str, per_task: int, synthesize: int) -> 
     )
 
 
-def train_target(recipe_name: str, steps: int | None) -> int:
+def train_target(recipe_name: str, steps: int | None, suite: str) -> int:
+    """Steps a column trains to: ``--steps``, else the recipe's on ``suite``."""
     from awda_bench.training.recipe import load_recipe
 
-    return steps if steps is not None else load_recipe(recipe_name).train.max_steps
+    return steps if steps is not None else load_recipe(recipe_name).for_suite(suite).train.max_steps
 
 
 def _quiet(progress: bool) -> list[str]:
@@ -333,7 +334,7 @@ def _collect_stages(config: ReproduceConfig, suite: Suite) -> tuple[list[Stage],
             )
         )  # fmt: skip
         val = ["--val-data", str(test)]
-    target = train_target(config.recipe, config.steps)
+    target = train_target(config.recipe, config.steps, config.suite)
     recipe = load_recipe(config.recipe)
     tasks, units = _eval_tasks(suite, config.hold_out)
     plan = _Plan(

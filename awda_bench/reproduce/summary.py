@@ -88,7 +88,8 @@ def write_summary(config: ReproduceConfig) -> Path:
     report = out / "report"
     summary = json.loads((report / "summary.json").read_text())
     recipe = load_recipe(config.recipe)
-    trunk = recipe.for_suite(config.suite).model.trunk  # the sizes it trains this suite with
+    on_suite = recipe.for_suite(config.suite)  # what it trains this suite with
+    trunk, schedule = on_suite.model.trunk, on_suite.train
     manifest = read_manifest(train_data(config)) or {}
     d = manifest.get("definition", {})
     counts = manifest.get("counts", {}).get("by_role", {})
@@ -118,9 +119,9 @@ def write_summary(config: ReproduceConfig) -> Path:
         f"{PAPER_IMAGE.get(config.suite, PAPER_SCALE['image'])} |",
         f"| demos per training task | {d.get('episodes_per_task')} per embodiment; "
         f"{d.get('synthesize', 0)} synthesized; kept {kept} | {PAPER_SCALE['demos_per_task']} |",
-        f"| training | {train_target(config.recipe, config.steps)} steps x batch "
-        f"{recipe.train.batch_size}, snapshot "
-        f"every {recipe.train.snapshot_every_steps} | {PAPER_SCALE['steps']} |",
+        f"| training | {train_target(config.recipe, config.steps, config.suite)} steps x batch "
+        f"{schedule.batch_size}, snapshot "
+        f"every {schedule.snapshot_every_steps} | {PAPER_SCALE['steps']} |",
         f"| dataset fingerprint | `{manifest.get('fingerprint')}` | – |",
         f"| grasp target (AWDA columns) | `{config.grasp_select}` (`reproduce --grasp-select`) "
         "| `centre` (nearest the wrist image's centre) |",

@@ -24,6 +24,8 @@ Layout::
               saturation
     [suite.<name>.model]  [model] fields that differ on that suite's collections (optional; e.g.
               Meta-World's 224x224 frames); ``train`` applies them (:meth:`Recipe.for_suite`)
+    [suite.<name>.train]  [train] fields that differ there (optional; e.g. Meta-World's steps);
+              ``--steps`` / ``--snapshot-every`` / ``--seed`` still override them
 
 A variant may start from another recipe: ``extends = "small"`` (a name in the same directory, or
 a ``.toml`` path relative to the variant's file) takes every table of the base and overrides the
@@ -207,6 +209,9 @@ class Recipe:
     suite_models: dict[str, dict[str, Any]] = field(default_factory=dict)
     """Suite -> ``[model]`` fields that differ on that suite's collections (the ``[suite.<name>.
     model]`` tables: Meta-World's 224x224 frames); applied by :meth:`for_suite`."""
+    suite_trains: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """Suite -> ``[train]`` fields that differ there (the ``[suite.<name>.train]`` tables);
+    applied by :meth:`for_suite`."""
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (what snapshots and ``train.json`` record); ``path`` left out, and the
@@ -220,17 +225,23 @@ class Recipe:
         }
         if self.suite_models:
             out["suite_models"] = json.loads(json.dumps(self.suite_models))
+        if self.suite_trains:
+            out["suite_trains"] = json.loads(json.dumps(self.suite_trains))
         return out
 
     def for_suite(self, suite: str) -> Recipe:
-        """The recipe as it trains on a collection of ``suite``: that suite's ``[model]``
-        overrides applied, none left."""
+        """The recipe as it trains on a collection of ``suite``: that suite's ``[model]`` and
+        ``[train]`` overrides applied, none left (apply :meth:`with_schedule` after this)."""
         from dataclasses import replace
 
         overrides = self.suite_models.get(suite, {})
         table = {**model_table(self.model, self.data), **overrides}
         model, data = split_model_table(table, f"recipe {self.name} [suite.{suite}.model]")
-        return replace(self, model=model, data=data, suite_models={})
+        train = self.train
+        if suite in self.suite_trains:
+            train_table = {**config_to_dict(self.train), **self.suite_trains[suite]}
+            train = config_from_dict(TrainRecipe, train_table)
+        return replace(self, model=model, data=data, train=train, suite_models={}, suite_trains={})
 
     @property
     def sha256(self) -> str:
@@ -291,9 +302,14 @@ def _resolved_toml(path: Path, recipes_dir: Path, chain: tuple[Path, ...]) -> di
         merged[table] = {**inherited, **own} if both else own  # malformed: refused below
     suites = dict(base.get("suite", {}))
     for suite, own_suite in raw.get("suite", {}).items():
-        if isinstance(own_suite, dict) and isinstance(own_suite.get("model", {}), dict):
-            inherited = suites.get(suite, {}).get("model", {})
-            own_suite = {**own_suite, "model": {**inherited, **own_suite.get("model", {})}}
+        if isinstance(own_suite, dict):
+            merged_suite = {**suites.get(suite, {}), **own_suite}
+            for sub in ("model", "train"):
+                inherited = suites.get(suite, {}).get(sub, {})
+                own = own_suite.get(sub, {})
+                if isinstance(inherited, dict) and isinstance(own, dict) and (inherited or own):
+                    merged_suite[sub] = {**inherited, **own}
+            own_suite = merged_suite
         suites[suite] = own_suite  # anything malformed is refused by load_recipe, naming it
     merged["suite"] = suites
     return merged
@@ -319,13 +335,23 @@ def load_recipe(name_or_path: str, recipes_dir: Path = RECIPES_DIR) -> Recipe:
         raise UsageError(f"recipe {path} needs a name and a non-empty suites list")
     suites = tuple(str(s) for s in raw["suites"])
     suite_models: dict[str, dict[str, Any]] = {}
+    suite_trains: dict[str, dict[str, Any]] = {}
     for suite, table in raw.get("suite", {}).items():
-        if suite not in suites or not isinstance(table, dict) or set(table) - {"model"}:
+        subs = table if isinstance(table, dict) else {}
+        if (
+            suite not in suites
+            or not isinstance(table, dict)
+            or set(table) - {"model", "train"}
+            or not all(isinstance(v, dict) for v in subs.values())
+        ):
             raise UsageError(
                 f"recipe {path}: [suite.{suite}] must name one of its suites ({', '.join(suites)}) "
-                "and hold only a [suite.<name>.model] table"
+                "and hold only [suite.<name>.model] and [suite.<name>.train] tables"
             )
-        suite_models[suite] = dict(table.get("model", {}))
+        if "model" in table:
+            suite_models[suite] = dict(table["model"])
+        if "train" in table:
+            suite_trains[suite] = dict(table["train"])
     table = raw.get("model", {})
     if not isinstance(table, dict):
         raise UsageError(f"recipe {path}: model must be a [model] table")
@@ -339,7 +365,8 @@ def load_recipe(name_or_path: str, recipes_dir: Path = RECIPES_DIR) -> Recipe:
         augment=config_from_dict(AugmentRecipe, raw.get("augment", {})),
         path=path,
         suite_models=suite_models,
+        suite_trains=suite_trains,
     )
-    for suite in suite_models:
+    for suite in {*suite_models, *suite_trains}:
         recipe.for_suite(suite)  # a bad override is refused here, naming the field
     return recipe

@@ -662,11 +662,10 @@ class _Progress:
 
 def _run_training(request: TrainRequest) -> TrainOutcome:
     column = column_for(request.method, request.ablation)
-    recipe = load_recipe(request.recipe).with_schedule(
-        request.steps, request.snapshot_every, request.seed
-    )
+    recipe = load_recipe(request.recipe)
     device = resolve_device(request.device)
-    sources, recipe = _open_sources(request, recipe, column)
+    sources, recipe = _open_sources(request, recipe, column)  # the suite's tables applied
+    recipe = recipe.with_schedule(request.steps, request.snapshot_every, request.seed)
     if request.threads is not None:
         torch.set_num_threads(request.threads)
     samples = _make_samples(sources, recipe, column, request.progress)
