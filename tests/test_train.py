@@ -2,17 +2,18 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import pytest
 import torch
 
-from awda_bench.errors import CorruptFileError
+from awda_bench.errors import CorruptFileError, UsageError
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig, TrainConfig, TrunkConfig
 from awda_bench.models.snapshot import list_snapshots, load_snapshot
 from awda_bench.models.synthetic import SyntheticWaypointDataset
-from awda_bench.training.loop import batch_indices, resolve_device, train
+from awda_bench.training.loop import batch_indices, learning_rate_at, resolve_device, train
 
 torch.set_num_threads(1)
 
@@ -102,3 +103,33 @@ def test_ema_snapshots_hold_the_average_and_resume_bit_identically(tmp_path: Pat
         )
     with pytest.raises(CorruptFileError, match="holds raw weights"):
         train(_model(0), data, TrainConfig(**{**cfg.__dict__, "max_steps": 6}), tmp_path / "plain")
+
+
+def test_cosine_schedule_sets_each_steps_step_size_and_resumes_on_the_same_curve(
+    tmp_path: Path,
+) -> None:
+    data = SyntheticWaypointDataset(6, height_px=64, width_px=64, demo_frames=1)
+    cfg = TrainConfig(
+        batch_size=2,
+        max_steps=4,
+        snapshot_every_steps=2,
+        seed=3,
+        device="cpu",
+        lr_schedule="cosine",
+    )
+    seen: list[float] = []
+    full = train(_model(0), data, cfg, tmp_path / "full", on_step=lambda s, i: seen.append(i["lr"]))
+    # half a cosine from 5e-4 at step 0 down towards 0 at max_steps
+    assert seen == pytest.approx([5e-4, 5e-4 * (1 + 2**-0.5) / 2, 2.5e-4, 5e-4 * (1 - 2**-0.5) / 2])
+    assert [learning_rate_at(cfg, s) for s in range(4)] == seen
+    constant = TrainConfig(**{**cfg.__dict__, "lr_schedule": "constant"})
+    assert learning_rate_at(constant, 3) == 5e-4
+    assert train(_model(0), data, constant, tmp_path / "constant").losses[2:] != full.losses[2:]
+
+    # an interrupted run (its step-2 snapshot) resumed to max_steps: the same curve, bit for bit
+    (tmp_path / "split").mkdir()
+    shutil.copy(list_snapshots(tmp_path / "full")[0], tmp_path / "split")
+    resumed = train(_model(99), data, cfg, tmp_path / "split")
+    assert resumed.start_step == 2 and resumed.losses == full.losses[2:]
+    with pytest.raises(UsageError, match="lr_schedule"):
+        TrainConfig(lr_schedule="linear")

@@ -8,6 +8,7 @@ here (1 attention layer, narrow MLPs, batch 2): a step costs well under a second
 from __future__ import annotations
 
 import json
+import math
 import shutil
 from dataclasses import replace
 from pathlib import Path
@@ -327,6 +328,29 @@ def test_an_ema_recipe_snapshots_the_average_and_the_policy_plays_it(
     bad = recipe.parent / "tiny-ema-bad.toml"
     bad.write_text(f'extends = "{recipe.name}"\nname = "bad"\n[train]\nema_decay = 1.0\n')
     with pytest.raises(UsageError, match="ema_decay"):
+        load_recipe(str(bad))
+
+
+def test_a_cosine_recipe_reaches_the_loop_and_logs_its_step_size(
+    tiny: Path, recipe: Path, tmp_path: Path
+) -> None:
+    cosine = recipe.parent / "tiny-cosine.toml"
+    cosine.write_text(
+        f'extends = "{recipe.name}"\nname = "tiny-cosine"\n[train]\nlr_schedule = "cosine"\n'
+    )
+    out = tmp_path / "ckpt"
+    args = ["--method", "awda", "--data", str(tiny), "--out", str(out), "--recipe", str(cosine)]
+    assert _train(*args, "--steps", "4", "--snapshot-every", "2") == 0
+    snap = load_snapshot(list_snapshots(out)[-1])
+    assert snap.training is not None
+    assert snap.training["recipe"]["train"]["lr_schedule"] == "cosine"
+    steps, lr = read_metrics(out / "metrics.csv")[("train", "lr")]
+    assert steps == [1, 2, 3, 4]
+    base = load_recipe(str(cosine)).train.learning_rate
+    assert lr == pytest.approx([base * (1 + math.cos(math.pi * s / 4)) / 2 for s in range(4)])
+    bad = recipe.parent / "tiny-cosine-bad.toml"
+    bad.write_text(f'extends = "{recipe.name}"\nname = "bad"\n[train]\nlr_schedule = "step"\n')
+    with pytest.raises(UsageError, match="lr_schedule"):
         load_recipe(str(bad))
 
 

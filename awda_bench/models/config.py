@@ -37,6 +37,8 @@ CELL_HEADS: tuple[str, ...] = ("demo-to-scene", "demo-pointer")
 (:mod:`awda_bench.models.cell_readout`; camera rays when the config has a camera)."""
 
 DEVICE_CHOICES: tuple[str, ...] = ("auto", "cpu", "cuda")
+LR_SCHEDULES: tuple[str, ...] = ("constant", "cosine")
+"""Step-size schedules of the training loop (``TrainConfig.lr_schedule``)."""
 """``auto`` picks CUDA when ``torch.cuda.is_available()``, else the CPU."""
 
 
@@ -516,6 +518,10 @@ class TrainConfig:
     ema_decay: float = 0.0
     """Snapshots hold an exponential moving average of the weights with this decay (0: the
     weights themselves; :func:`awda_bench.training.loop.train`)."""
+    lr_schedule: str = "constant"
+    """``constant`` (Table S2) or ``cosine``: the step size at 0-based step ``s`` is
+    ``learning_rate * (1 + cos(pi * s / max_steps)) / 2``
+    (:func:`awda_bench.training.loop.learning_rate_at`)."""
 
     def __post_init__(self) -> None:
         o = "TrainConfig"
@@ -531,6 +537,13 @@ class TrainConfig:
         )
         check_field(
             self.device in DEVICE_CHOICES, o, "device", self.device, f"one of {DEVICE_CHOICES}"
+        )
+        check_field(
+            self.lr_schedule in LR_SCHEDULES,
+            o,
+            "lr_schedule",
+            self.lr_schedule,
+            f"one of {LR_SCHEDULES}",
         )
 
 

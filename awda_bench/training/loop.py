@@ -16,6 +16,7 @@ exact loss curve of an uninterrupted run on the same device::
 
 from __future__ import annotations
 
+import math
 import random
 import time
 from collections.abc import Callable, Mapping
@@ -101,6 +102,14 @@ def moving_average(model: AwdaNet | TosviNet, decay: float) -> AveragedModel:
     return AveragedModel(model, multi_avg_fn=get_ema_multi_avg_fn(decay), use_buffers=True)
 
 
+def learning_rate_at(config: TrainConfig, step: int) -> float:
+    """Adam's step size for the step taken at 0-based ``step`` (``config.lr_schedule``): a function
+    of the step alone, so a resumed run continues the same curve."""
+    if config.lr_schedule == "cosine":
+        return config.learning_rate * 0.5 * (1.0 + math.cos(math.pi * step / config.max_steps))
+    return config.learning_rate
+
+
 BatchTransform = Callable[[dict[str, Any], int], dict[str, Any]]
 """``transform(batch, step) -> batch``: training-time data treatment of the collated batch taken at
 ``step`` (0-based), already on the device. It must draw its randomness from ``(seed, step)``
@@ -129,6 +138,9 @@ def train(
     and treating the batch) and ``compute_s`` (forward, backward, optimizer) [s];
     ``on_snapshot(step, path)`` after each snapshot is written. ``transform`` is applied to every
     collated batch (:data:`BatchTransform`); ``training_record`` is stored in every snapshot.
+
+    With a ``config.lr_schedule`` other than ``constant`` the step size follows
+    :func:`learning_rate_at` and ``info`` also holds ``lr``.
 
     With ``config.ema_decay`` > 0 the snapshots hold a moving average of the weights
     (:func:`moving_average`, updated after every step; pass ``averaged`` to read it during
@@ -180,6 +192,11 @@ def train(
         loss, info = model.compute_loss(batch)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
+        if config.lr_schedule != "constant":
+            learning_rate = learning_rate_at(config, step)
+            for group in optimizer.param_groups:
+                group["lr"] = learning_rate
+            info = {**info, "lr": learning_rate}
         optimizer.step()
         if averaged is not None:
             averaged.update_parameters(model)

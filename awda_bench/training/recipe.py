@@ -46,6 +46,7 @@ from typing import Any
 from awda_bench.errors import CorruptFileError, UnknownChoiceError, UsageError
 from awda_bench.models.config import (
     AWDA_TABLE_FIELDS,
+    LR_SCHEDULES,
     TOSVI_TABLE_FIELDS,
     ModelSpec,
     check_field,
@@ -136,6 +137,10 @@ class TrainRecipe:
     keeps one): each step ``ema = decay * ema + (1 - decay) * weights``, and snapshots, validation
     and evaluation use the average (the raw weights stay in the snapshot to resume). 0: off, as
     in the reference. 0.995 averages over ~200 steps."""
+    lr_schedule: str = "constant"
+    """``constant`` (Table S2, the reference) or ``cosine``: the step size anneals from
+    ``learning_rate`` to 0 at ``max_steps`` (half a cosine). A run resumed with more steps follows
+    the new ``max_steps``'s curve from its step on (the step size jumps up)."""
 
     def __post_init__(self) -> None:
         o = "recipe train"
@@ -150,6 +155,13 @@ class TrainRecipe:
         check_field(self.learning_rate > 0, o, "learning_rate", self.learning_rate, "a float > 0")
         check_field(self.seed >= 0, o, "seed", self.seed, "an int >= 0")
         check_field(0.0 <= self.ema_decay < 1.0, o, "ema_decay", self.ema_decay, "in [0, 1)")
+        check_field(
+            self.lr_schedule in LR_SCHEDULES,
+            o,
+            "lr_schedule",
+            self.lr_schedule,
+            f"one of {LR_SCHEDULES}",
+        )
 
 
 @dataclass(frozen=True)

@@ -686,6 +686,7 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
         device=request.device,
         resume=resuming,
         ema_decay=t.ema_decay,
+        lr_schedule=t.lr_schedule,
     )
     averaged = moving_average(model, t.ema_decay) if t.ema_decay > 0 else None
     val_dataset = samples.val_dataset
