@@ -5,13 +5,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 from training_helpers import FROZEN_LITE0, TINY_NET, recipe_toml
 
 from awda_bench.cli import main
 from awda_bench.data.datasets import AwdaPairDataset, CollectedData
 from awda_bench.models.snapshot import list_snapshots
-from awda_bench.training.offline_waypoints import other_task_partners
+from awda_bench.training.offline_waypoints import axis_bias_cm, other_task_partners, per_task_table
 
 POINTER = {**TINY_NET, **FROZEN_LITE0, "head": "demo-pointer", "identification_weight": 1.0}
 
@@ -43,6 +44,7 @@ def test_study_offline_measures_every_pair_per_task(
     assert len(tasks) > 1 or rows["all"][effect] == ""
     copy, shift = header.index("demo_copy_cm"), header.index("true_shift_cm")
     assert float(rows["all"][copy]) > 0.0 and float(rows["all"][shift]) > 0.0
+    assert all(f"bias_{axis}_cm" in header for axis in "xyz")
     assert "wp_err_cm" in capsys.readouterr().out
     # only these tasks
     one = min(tasks)
@@ -67,3 +69,31 @@ def test_demo_swap_partners_are_of_another_task() -> None:
     assert list(partners) == [3, 3, 3, 5, 5, 0]  # the nearest of another task after each, cyclic
     assert all(tasks[j] != t for t, j in zip(tasks, partners, strict=True))
     assert list(other_task_partners([4, 4])) == [-1, -1]  # one task: no partner
+
+
+def test_axis_bias_is_the_signed_mean_offset_per_world_axis() -> None:
+    true = np.zeros((5, 3))
+    high = {"predicted": true + [0.0, 0.0, 0.08], "true": true}  # every waypoint 8 cm up
+    left = {"predicted": true + [-0.02, 0.0, 0.0], "true": true}
+    np.testing.assert_allclose(axis_bias_cm([high]), [0.0, 0.0, 8.0])
+    np.testing.assert_allclose(axis_bias_cm([high, left]), [-1.0, 0.0, 4.0])
+    one = {"predicted": true.copy(), "true": true.copy()}
+    one["predicted"][2] = [0.0, 0.05, -0.05]  # one of five waypoints off
+    np.testing.assert_allclose(axis_bias_cm([one]), [0.0, 1.0, -1.0])
+
+
+def test_per_task_table_prints_each_tasks_axis_bias() -> None:
+    def row(task: int, dz: float) -> dict:
+        true = np.zeros((5, 3))
+        return {
+            "task": task, "task_name": f"t{task}", "wp_err_cm": abs(dz) * 100, "end_err_cm": 0.0,
+            "grasp_pred": False, "grasp_true": False, "grasp_err_cm": np.nan,
+            "demo_copy_cm": 0.0, "true_shift_cm": 0.0, "demo_effect_cm": np.nan,
+            "object_near": np.nan, "moved_near": np.nan,
+            "predicted": true + [0.0, 0.0, dz], "true": true,
+        }  # fmt: skip
+
+    table = per_task_table([row(6, 0.09), row(6, 0.07), row(7, -0.01)])
+    assert table.loc["t6", "bias_z_cm"] == pytest.approx(8.0)
+    assert table.loc["t7", "bias_z_cm"] == pytest.approx(-1.0)
+    assert table.loc["t6", "bias_x_cm"] == pytest.approx(0.0)

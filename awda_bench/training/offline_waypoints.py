@@ -26,6 +26,10 @@ trajectory (:func:`awda_bench.waypoints.extract_waypoints`), per task::
                      the pair's own demo and with another task's demo (the same o_1): how much
                      the demonstration moves the prediction (0: the network ignores the demo and
                      answers from the scene alone)
+    bias_x_cm        mean over pairs and waypoints of predicted minus true waypoint, per world
+    bias_y_cm        axis: a network that finds a part in the image but not its height along
+    bias_z_cm        the camera's ray shows it here (Meta-World's held-out pushes: z +5..+10 cm,
+                     ``reports/learned/recipe-study-metaworld.md``)
     object_near      ``demo-pointer`` snapshots: fraction of pairs whose object softmax over o_1
     moved_near       (and what-moved softmax over the demo) peaks within one cell (Chebyshev) of
                      the identification label: the first grasp, or where the hand first moves the
@@ -208,6 +212,14 @@ def _spread(points: list[np.ndarray]) -> float:
     return float(np.linalg.norm(stack - stack.mean(0), axis=-1).mean() * 100)
 
 
+def axis_bias_cm(rows: list[dict[str, Any]]) -> np.ndarray:
+    """``(3,)``: the mean of predicted minus true waypoints over ``rows``' pairs and waypoints,
+    per world axis [cm]."""
+    predicted = np.stack([r["predicted"] for r in rows])
+    true = np.stack([r["true"] for r in rows])
+    return (predicted - true).reshape(-1, 3).mean(axis=0) * 100
+
+
 def per_task_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
     """The per-task measures (module docstring), one row per task, plus ``all`` (medians over
     every pair's waypoint and end errors)."""
@@ -230,6 +242,7 @@ def per_task_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
             "demo_copy_cm": frame["demo_copy_cm"].median(),
             "true_shift_cm": frame["true_shift_cm"].median(),
             "demo_effect_cm": frame["demo_effect_cm"].median(),
+            **dict(zip(("bias_x_cm", "bias_y_cm", "bias_z_cm"), axis_bias_cm(group), strict=True)),
             "object_near": frame["object_near"].mean(),
             "moved_near": frame["moved_near"].mean(),
         })  # fmt: skip
