@@ -27,8 +27,8 @@ trajectory (:func:`awda_bench.waypoints.extract_waypoints`), per task::
                      the demonstration moves the prediction (0: the network ignores the demo and
                      answers from the scene alone)
     bias_x_cm        mean over pairs and waypoints of predicted minus true waypoint, per world
-    bias_y_cm        axis: a network that finds a part in the image but not its height along
-    bias_z_cm        the camera's ray shows it here (Meta-World's held-out pushes: z +5..+10 cm,
+    bias_y_cm        axis: a systematic offset, e.g. waypoints placed at a training sibling's
+    bias_z_cm        height (Meta-World's held-out button-press: z +8 cm,
                      ``reports/learned/recipe-study-metaworld.md``)
     object_near      ``demo-pointer`` snapshots: fraction of pairs whose object softmax over o_1
     moved_near       (and what-moved softmax over the demo) peaks within one cell (Chebyshev) of
