@@ -13,7 +13,13 @@ from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.cell_readout import CellHeadShape, HandPath
 from awda_bench.models.config import AwdaConfig, TrunkConfig
 from awda_bench.models.demo_pointer import DemoPointer
-from awda_bench.models.identification_loss import demo_frame_points, grasp_cells, hand_loss
+from awda_bench.models.identification_loss import (
+    demo_frame_points,
+    grasp_cells,
+    hand_loss,
+    place_loss,
+    release_cells,
+)
 
 K = np.array([[219.66, 0.0, 160.0], [0.0, 219.66, 120.0], [0.0, 0.0, 1.0]])
 E = np.array(
@@ -72,7 +78,7 @@ def test_the_demo_pointer_points_by_content_not_by_place() -> None:
 
     def scores(demo: torch.Tensor, first: torch.Tensor) -> torch.Tensor:
         with torch.no_grad():
-            x, moved, found, _ = head.tokens(demo, first)
+            x, moved, found = head.tokens(demo, first)[:3]
             where = (
                 head.readout.where_logits[1](x) + found[..., None] * head.readout.prior_weight[1]
             )
@@ -128,7 +134,7 @@ def test_identification_finds_the_object_of_an_unseen_pairing() -> None:
     opt = torch.optim.Adam(head.parameters(), 3e-3)
     for step in range(150):
         demo, first, demo_cell, first_cell = _scenes(seen, 32, seed=step)
-        _, moved, found, _ = head.tokens(demo, first)
+        _, moved, found = head.tokens(demo, first)[:3]
         loss = F.cross_entropy(moved, demo_cell) + F.cross_entropy(found, first_cell)
         opt.zero_grad()
         loss.backward()
@@ -260,3 +266,122 @@ def test_the_hand_path_trains_with_the_identification_loss() -> None:
             batch["demo_features"], batch["first_frame_features"], batch["head"]
         )
     assert out.shape == (2, 15, 4) and bool(torch.isfinite(out).all())
+
+
+def _apart(h: int, w: int, g: torch.Generator) -> torch.Tensor:
+    """Three random cells of an ``h x w`` grid, each two or more cells from the others."""
+    while True:
+        cells = torch.randperm(h * w, generator=g)[:3]
+        r, c = cells // w, cells % w
+        gap = torch.maximum((r[:, None] - r).abs(), (c[:, None] - c).abs())
+        if int((gap + 9 * torch.eye(3, dtype=torch.long)).min()) >= 2:
+            return cells
+
+
+def _stacks(pairs: list[tuple[int, int]], n: int, seed: int) -> tuple[torch.Tensor, ...]:
+    """Synthetic stacking demos: three cube kinds (fixed feature vectors) at random cells of a
+    6 x 8 grid, two or more cells apart (the scenes keep their cubes 11 cm apart, 3-5 cells);
+    the demo carries cube ``a`` onto cube ``b``, which stays where it is; o_1 shows the three at
+    other such cells. Labels: ``b``'s cell in the demo and in o_1."""
+    g = torch.Generator().manual_seed(seed)
+    kinds = torch.randn(3, 8, generator=torch.Generator().manual_seed(321)) * 2
+    h, w, frames = 6, 8, 5
+    demo = 0.1 * torch.randn(n, frames, 8, h, w, generator=g)
+    first = 0.1 * torch.randn(n, 8, h, w, generator=g)
+    put_cell, target_cell = torch.empty(n, dtype=torch.long), torch.empty(n, dtype=torch.long)
+    for i in range(n):
+        a, b = pairs[int(torch.randint(len(pairs), (1,), generator=g))]
+        demo_cells, first_cells = _apart(h, w, g), _apart(h, w, g)
+        for kind in range(3):
+            r, c = divmod(int(first_cells[kind]), w)
+            first[i, :, r, c] += kinds[kind]
+            r, c = divmod(int(demo_cells[kind]), w)
+            if kind != a:
+                demo[i, :, :, r, c] += kinds[kind]
+                continue
+            rb, cb = divmod(int(demo_cells[b]), w)
+            for t in range(frames):  # carried from (r, c) onto b
+                f = t / (frames - 1)
+                demo[i, t, :, round(r + f * (rb - r)), round(c + f * (cb - c))] += kinds[kind]
+        put_cell[i], target_cell[i] = demo_cells[b], first_cells[b]
+    return demo, first, put_cell, target_cell
+
+
+def test_the_place_target_finds_the_destination_of_an_unseen_pairing() -> None:
+    """Trained on five of the six (cube, onto cube) orders, the place target finds the base cube
+    of the sixth in o_1, whose cubes stand elsewhere than the demo's: it identifies the place
+    by appearance, as the object is identified."""
+    torch.manual_seed(0)
+    held_out = [(2, 0)]
+    seen = [(a, b) for a in range(3) for b in range(3) if a != b and (a, b) not in held_out]
+    shape = CellHeadShape(
+        channels=8, grid=(6, 8), demo_frames=5, dim=16, dropout=0.0, hidden=32,
+        waypoints=5, waypoint_dim=4, num_heads=2, place_target=True,
+    )  # fmt: skip
+    head = DemoPointer(shape)
+    opt = torch.optim.Adam(head.parameters(), 3e-3)
+    for step in range(150):
+        demo, first, put_cell, target_cell = _stacks(seen, 32, seed=step)
+        tokens = head.tokens(demo, first)
+        assert tokens.put is not None and tokens.target is not None
+        loss = F.cross_entropy(tokens.put, put_cell) + F.cross_entropy(tokens.target, target_cell)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    head.eval()
+    demo, first, _, target_cell = _stacks(held_out, 200, seed=10_000)
+    with torch.no_grad():
+        target = head.tokens(demo, first).target
+    assert target is not None
+    assert float((target.argmax(1) == target_cell).float().mean()) >= 0.9
+    # the readout takes both priors, and only a place-target readout takes two
+    with torch.no_grad():
+        out = head.pointer(demo[:2], first[:2], torch.zeros(2).long())
+    assert out.target_logits is not None and out.waypoints.shape == (2, 5, 4)
+    with pytest.raises(ValueError, match="place_target"):
+        head.readout.where(torch.zeros(1, 48, 16), 0, prior=torch.zeros(1, 48))
+    plain = DemoPointer(_shape((6, 8), 5))
+    with pytest.raises(ValueError, match="place_target"):
+        plain.readout.where(torch.zeros(1, 48, 16), 0, prior=torch.zeros(1, 48, 2))
+
+
+def test_release_cells_project_the_last_grasping_point_of_a_trajectory_that_lets_go() -> None:
+    camera = (torch.tensor(K), torch.tensor(E), (240, 320))
+    point = np.array([-0.05, -0.1, 0.08])
+    cam = E[:, :3] @ point + E[:, 3]
+    u, v = (K @ cam)[:2] / cam[2]
+    trajectory = torch.zeros(3, 8, 4, dtype=torch.float32)
+    trajectory[:, :, :3] = torch.tensor([0.3, 0.3, 0.3])
+    trajectory[:, 2:6, 3] = 1.0  # rows 0 and 1 grasp at points 2-5, row 1 never lets go
+    trajectory[1, 6:, 3] = 1.0
+    trajectory[2, :, 3] = 0.0  # row 2 never grasps
+    trajectory[0, 5, :3] = torch.tensor(point, dtype=torch.float32)  # where row 0 lets go
+    cells, ok = release_cells(trajectory, camera, (15, 20))
+    assert ok.tolist() == [True, False, False]
+    assert int(cells[0]) == int(v // 16) * 20 + int(u // 16)
+
+
+def test_the_place_loss_labels_task_rows_that_let_go() -> None:
+    """Through the whole network: the place target needs the identification loss; its loss
+    counts the task-driven rows whose demo and trajectory let go, not the synthesized ones."""
+    camera, pointer = CAMERA, POINTER_TRUNK
+    with pytest.raises(UsageError, match="place_target"):
+        AwdaConfig(trunk=pointer, place_target=True, **camera)  # no identification loss
+    config = AwdaConfig(trunk=pointer, identification_weight=1.0, place_target=True, **camera)
+    model = AwdaNet(config, load_backbone_weights=False)
+    batch = _grasping_batch()
+    batch["trajectory"][:, 8:, 3] = 0.0  # let go at point 7
+    batch["demo_trajectory"] = batch["trajectory"]
+    batch["head"] = torch.tensor([0, 1])  # row 1 is synthesized
+    loss, info = model.compute_loss(batch)
+    assert info["id_place_rows"] == 0.5 and info["id_put"] > 0 and info["id_target"] > 0
+    loss.backward()
+    assert model.scene_head is not None and model.scene_head.put is not None
+    assert model.scene_head.put[0].weight.grad is not None
+    assert model.scene_head.readout.target_weight.grad is not None
+    batch["head"] = torch.tensor([1, 1])  # no task rows: a zero place loss, still a graph
+    zero, _ = place_loss(
+        torch.zeros(2, 300, requires_grad=True), torch.zeros(2, 300), batch["demo_trajectory"],
+        batch["trajectory"], batch["head"], model.ray_cameras, None, model.grid,
+    )  # fmt: skip
+    assert float(zero) == 0.0 and zero.requires_grad

@@ -39,7 +39,7 @@ from awda_bench.models.config import CELL_HEADS, AwdaConfig
 from awda_bench.models.demo_pointer import DemoPointer, PointerOutput
 from awda_bench.models.demo_to_scene import DemoToScene
 from awda_bench.models.frame_encoder import feature_map_size
-from awda_bench.models.identification_loss import hand_loss, identification_loss
+from awda_bench.models.identification_loss import hand_loss, identification_loss, place_loss
 from awda_bench.models.trunk import VisualTrunk
 from awda_bench.models.waypoint_loss import multi_waypoint_sdtw_loss, split_waypoint_sets
 
@@ -79,6 +79,7 @@ class AwdaNet(nn.Module):
                 height_offset_m=config.ray_height_offset_m,
                 offset_m=config.ray_offset_m,
                 hand_path=config.demo_hand_path,
+                place_target=config.place_target,
             )
             self.grid = shape.grid
             if trunk.head == "demo-pointer":
@@ -232,6 +233,19 @@ class AwdaNet(nn.Module):
                 )
                 loss = loss + cfg.identification_weight * hand
                 info.update(hand_info)
+            if pointed.put_logits is not None and pointed.target_logits is not None:
+                place, place_info = place_loss(
+                    pointed.put_logits,
+                    pointed.target_logits,
+                    batch["demo_trajectory"],
+                    batch["trajectory"],
+                    batch["head"].long(),
+                    self.ray_cameras,
+                    camera,
+                    self.grid,
+                )
+                loss = loss + cfg.identification_weight * place
+                info.update(place_info)
         return loss, {"loss": float(loss.detach()), **info}
 
     def waypoint_sets(self, waypoints: torch.Tensor) -> list[torch.Tensor]:

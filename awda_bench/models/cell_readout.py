@@ -106,6 +106,9 @@ class CellHeadShape:
     """How far a ray vote may move horizontally from its cell's ray [m]."""
     hand_path: bool = False
     """The readout takes a :class:`HandPath` (module docstring)."""
+    place_target: bool = False
+    """The head identifies where the object goes as it identifies the object (a second prior:
+    :mod:`awda_bench.models.demo_pointer`)."""
 
 
 class CellReadout(nn.Module):
@@ -113,7 +116,9 @@ class CellReadout(nn.Module):
 
     def __init__(self, shape: CellHeadShape, prior: bool = False) -> None:
         """``prior``: ``forward`` takes a logit per cell that every waypoint adds to its own,
-        scaled by a weight ``a_j`` learned per head and waypoint, starting at 0."""
+        scaled by a weight ``a_j`` learned per head and waypoint, starting at 0 (with
+        ``shape.place_target`` two logits per cell, ``(B, L, 2)``: the object's and the place
+        target's, the second scaled by its own ``b_j``)."""
         super().__init__()
         dim, hidden, cameras = shape.dim, shape.hidden, shape.cameras
         waypoints, waypoint_dim, num_heads = shape.waypoints, shape.waypoint_dim, shape.num_heads
@@ -132,6 +137,9 @@ class CellReadout(nn.Module):
             self.height = nn.Parameter(torch.full((num_heads, waypoints), INITIAL_HEIGHT_M))
         self.where_logits = nn.ModuleList(nn.Linear(dim, waypoints) for _ in range(num_heads))
         self.prior_weight = nn.Parameter(torch.zeros(num_heads, waypoints)) if prior else None
+        self.place_target = prior and shape.place_target
+        if self.place_target:
+            self.target_weight = nn.Parameter(torch.zeros(num_heads, waypoints))
         self.hand_path = shape.hand_path
         path_inputs = 2 * shape.demo_frames if shape.hand_path else 0
         if shape.hand_path:
@@ -185,7 +193,8 @@ class CellReadout(nn.Module):
         path: HandPath | None = None,
     ) -> torch.Tensor:
         """``p_j``: tokens ``(B, L, d)`` of samples of waypoint head ``head`` (and their prior
-        ``(B, L)``, their hand path) -> ``(B, L, N)``, a softmax over the cells per waypoint."""
+        ``(B, L)`` or ``(B, L, 2)``, their hand path) -> ``(B, L, N)``, a softmax over the cells
+        per waypoint."""
         logits = self.where_logits[head](x)
         if (prior is None) != (self.prior_weight is None):
             raise ValueError("a readout built with prior=True takes a prior, and only such a one")
@@ -194,6 +203,14 @@ class CellReadout(nn.Module):
                 "a readout built with hand_path=True takes a path, and only such a one"
             )
         if prior is not None and self.prior_weight is not None:
+            if (prior.dim() == 3) != self.place_target:
+                raise ValueError(
+                    "a readout built with place_target=True takes priors (B, L, 2), "
+                    "and only such a one"
+                )
+            if self.place_target:
+                logits = logits + prior[..., 1:2] * self.target_weight[head]
+                prior = prior[..., 0]
             logits = logits + prior[..., None] * self.prior_weight[head]
         if path is not None:
             phase = torch.softmax(self.path_phase[head], dim=-1)  # (N, Td)

@@ -205,6 +205,16 @@ class AwdaConfig:
     Off: the head has no notion of the demo's motion relative to its object (Meta-World's pushes:
     recipe-study-metaworld.md, V5). Needs ``identification_weight > 0`` (the hand loss shares
     its weight)."""
+    place_target: bool = False
+    """``demo-pointer`` head: identify where the object goes as the object is identified, by
+    appearance: where the demonstrator let go in the demo (a put softmax over the demo's cells,
+    supervised by its release point), what stood around there in the demo's first frame, and
+    which of o_1's cells holds the same (a target softmax, supervised by the agent trajectory's
+    release point), a second prior of every waypoint's cell softmax. Off: the place is read from
+    what happened at each cell during the demo, i.e. where the demo's scene had its target, which
+    in another scene is elsewhere (MOSAIC's carries: every grasped target released ~15-19 cm off,
+    reports/learned/mosaic-small20-*/carry.md). Needs ``identification_weight > 0`` (the place
+    loss shares its weight). A deviation: the reference has no identification losses."""
     ray_offset_m: float = 0.05
     """Cell heads voting on camera rays: how far [m] a cell's vote may move horizontally off its
     ray (``cell_readout``). 0.05: a waypoint is where the cells it points at are. Larger lets a
@@ -289,6 +299,13 @@ class AwdaConfig:
             o,
             "demo_hand_path",
             self.demo_hand_path,
+            "false, or true with identification_weight > 0 (head 'demo-pointer', a camera)",
+        )
+        check_field(
+            not self.place_target or self.identification_weight > 0.0,
+            o,
+            "place_target",
+            self.place_target,
             "false, or true with identification_weight > 0 (head 'demo-pointer', a camera)",
         )
         check_field(
@@ -399,6 +416,7 @@ AWDA_TABLE_FIELDS: tuple[str, ...] = (
     "ray_height_offset_m",
     "ray_offset_m",
     "demo_hand_path",
+    "place_target",
     "points_per_segment",
     "gamma",
     "attribute_scale",

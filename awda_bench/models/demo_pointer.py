@@ -34,6 +34,19 @@ Data flow, one sample (``d = attention_heads * attention_head_dim``, ``L = h*w``
               (a_j learned per waypoint, from 0), each cell voting an attributed point on its
               camera ray (:mod:`awda_bench.models.cell_readout`)
 
+With ``place_target`` (a deviation; ``AwdaConfig.place_target``), the place is identified as the
+object is, by appearance (the history above is where something was put *in the demo's scene*,
+which says nothing about where the same target stands in o_1's)::
+
+    put:      u(cell) = convs over [e(demo_1), ..., e(demo_Td)] -> a logit per cell
+              where the demonstrator put its object down (supervised: the demo's release cell)
+    target:   q = sum over cells of softmax(u)(cell) pool3(e(demo_1))(cell)   (d)
+              what stood there (and around: the release point images 1-2 cells off the target
+              it hovers over) in the demo's first frame
+    o_1 cell: t(cell) = MLP_target([e(o_1, cell), pool3(e(o_1))(cell) * q])   (d), added to x
+              r(cell) = w' . t(cell), the target logit (supervised: the agent's release cell),
+              a second prior: w_j . x(cell) + a_j s(cell) + b_j r(cell)
+
 With ``demo_hand_path`` (a deviation; ``AwdaConfig.demo_hand_path``)::
 
     hand:     k_t(cell) = convs over e(demo_t) -> a logit per cell: where the demonstrator's hand is
@@ -57,6 +70,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from awda_bench.models.cell_readout import CellHeadShape, CellReadout, HandPath
@@ -68,14 +82,49 @@ def _mlp(inputs: int, hidden: int, outputs: int, dropout: float) -> nn.Sequentia
     )
 
 
+def _demo_logits(inputs: int, hidden: int) -> nn.Sequential:
+    """Convolutions over the stacked demo frames' cells -> one logit per cell (what moved, where
+    it was put)."""
+    return nn.Sequential(
+        nn.Conv2d(inputs, hidden, kernel_size=1),
+        nn.GELU(),
+        nn.Conv2d(hidden, hidden, kernel_size=3, padding=1),
+        nn.GELU(),
+        nn.Conv2d(hidden, 1, kernel_size=1),
+    )
+
+
+def _pool3(cells: torch.Tensor) -> torch.Tensor:
+    """``(B, d, h, w)`` -> each cell's 3x3 neighbourhood mean, same shape (zeros beyond the
+    border)."""
+    return F.max_pool2d(cells, kernel_size=3, stride=1, padding=1)
+
+
 HAND_NARROWING = 4
 """The hand convolutions are this many times narrower than the head's MLPs: they run on every demo
 frame (10 of them), and at full width they doubled a training step (2.4 s against 1.1 s on the
 busy 2-core machine)."""
 
 
+class CellTokens(NamedTuple):
+    """What :meth:`DemoPointer.tokens` reads off the demo and o_1."""
+
+    x: torch.Tensor
+    """``(B, h*w, d)``: o_1's cell tokens, what the readout points at."""
+    moved: torch.Tensor
+    """``(B, h*w)``: the what-moved logits over the demo's first frame."""
+    found: torch.Tensor
+    """``(B, h*w)``: the object logits over o_1's cells."""
+    demo_cells: torch.Tensor
+    """``(B, Td, d, h, w)``: the embedded demo frames."""
+    put: torch.Tensor | None = None
+    """``(B, h*w)``: where in the demo the demonstrator put its object (``place_target``)."""
+    target: torch.Tensor | None = None
+    """``(B, h*w)``: which of o_1's cells the object goes to (``place_target``)."""
+
+
 class PointerOutput(NamedTuple):
-    """One forward pass: the waypoints and the two identification logits."""
+    """One forward pass: the waypoints and the identification logits."""
 
     waypoints: torch.Tensor
     """``(B, N, 3 + k)``."""
@@ -86,6 +135,10 @@ class PointerOutput(NamedTuple):
     hand_logits: torch.Tensor | None = None
     """``(B, Td, h*w)``: where the demonstrator's hand is in each demo frame (``hand_path``
     heads; ``None`` otherwise)."""
+    put_logits: torch.Tensor | None = None
+    """``(B, h*w)``: where in the demo the object was put down (``place_target`` heads)."""
+    target_logits: torch.Tensor | None = None
+    """``(B, h*w)``: which of o_1's cells it goes to (``place_target`` heads)."""
 
 
 class DemoPointer(nn.Module):
@@ -100,19 +153,16 @@ class DemoPointer(nn.Module):
             nn.Conv2d(channels, dim, kernel_size=1), nn.GELU(), nn.Conv2d(dim, dim, kernel_size=1)
         )
         self.history = _mlp(demo_frames * dim, hidden, dim, dropout)
-        self.moved = nn.Sequential(
-            nn.Conv2d(demo_frames * dim, hidden, kernel_size=1),
-            nn.GELU(),
-            nn.Conv2d(hidden, hidden, kernel_size=3, padding=1),
-            nn.GELU(),
-            nn.Conv2d(hidden, 1, kernel_size=1),
-        )
+        self.moved = _demo_logits(demo_frames * dim, hidden)
         self.object_cell = _mlp(2 * dim, hidden, dim, dropout)
         self.object_logit = nn.Linear(dim, 1)
         self.place_cell = _mlp(2 * dim, hidden, dim, dropout)
         self.context = nn.Conv2d(dim, dim, kernel_size=3, padding=1)
         self.norm = nn.LayerNorm(dim)
         self.readout = CellReadout(shape, prior=True)
+        self.put = _demo_logits(demo_frames * dim, hidden) if shape.place_target else None
+        self.target_cell = _mlp(2 * dim, hidden, dim, dropout) if shape.place_target else None
+        self.target_logit = nn.Linear(dim, 1) if shape.place_target else None
         narrow = max(hidden // HAND_NARROWING, 1)  # it runs on every demo frame
         self.hand = (
             nn.Sequential(
@@ -134,12 +184,19 @@ class DemoPointer(nn.Module):
         start = demo_cells[:, 0].flatten(2)  # (B, d, L): the demo's first frame
         return logits, torch.einsum("bl,bdl->bd", torch.softmax(logits, dim=1), start)
 
-    def tokens(
-        self, demo: torch.Tensor, first: torch.Tensor
-    ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-        """o_1's cell tokens ``(B, h*w, d)`` (what the readout points at), the what-moved logits
-        and the object logits (both ``(B, h*w)``), and the embedded demo frames
-        ``(B, Td, d, h, w)``."""
+    def where_put(self, demo_cells: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Embedded demo frames ``(B, Td, d, h, w)`` -> the put logits ``(B, h*w)`` and ``q``
+        ``(B, d)``: the demo's first frame around where they point (module docstring)."""
+        if self.put is None:
+            raise ValueError("this head was built without a place target (place_target)")
+        b, t, d, h, w = demo_cells.shape
+        logits = self.put(demo_cells.reshape(b, t * d, h, w)).flatten(1)
+        start = _pool3(demo_cells[:, 0]).flatten(2)  # (B, d, L)
+        return logits, torch.einsum("bl,bdl->bd", torch.softmax(logits, dim=1), start)
+
+    def tokens(self, demo: torch.Tensor, first: torch.Tensor) -> CellTokens:
+        """o_1's cell tokens (what the readout points at), the identification logits and the
+        embedded demo frames (:class:`CellTokens`)."""
         b, t, c, h, w = demo.shape
         cells = h * w
         demo_cells = self.embed(demo.reshape(b * t, c, h, w)).view(b, t, -1, h, w)
@@ -147,11 +204,20 @@ class DemoPointer(nn.Module):
         moved, g = self.what_moved(demo_cells)
         per_cell = demo_cells.flatten(3).permute(0, 3, 1, 2)  # (B, L, Td, d)
         history = self.history(per_cell.reshape(b, cells, t * d))
-        scene = self.embed(first).flatten(2).transpose(1, 2)  # (B, L, d)
+        embedded = self.embed(first)
+        scene = embedded.flatten(2).transpose(1, 2)  # (B, L, d)
         found = self.object_cell(torch.cat((scene, scene * g[:, None]), dim=-1))
         x = found + self.place_cell(torch.cat((scene, history), dim=-1))
+        put = target_logits = None
+        if self.target_cell is not None and self.target_logit is not None:
+            put, q = self.where_put(demo_cells)
+            around = _pool3(embedded).flatten(2).transpose(1, 2)  # (B, L, d)
+            target = self.target_cell(torch.cat((scene, around * q[:, None]), dim=-1))
+            x = x + target
+            target_logits = self.target_logit(target)[..., 0]
         x = x + self.context(x.transpose(1, 2).reshape(b, d, h, w)).flatten(2).transpose(1, 2)
-        return self.norm(x), moved, self.object_logit(found)[..., 0], demo_cells
+        found_logits = self.object_logit(found)[..., 0]
+        return CellTokens(self.norm(x), moved, found_logits, demo_cells, put, target_logits)
 
     def hand_path(
         self, demo_cells: torch.Tensor, moved: torch.Tensor, found: torch.Tensor
@@ -176,12 +242,14 @@ class DemoPointer(nn.Module):
         camera: torch.Tensor | None = None,
     ) -> PointerOutput:
         """``camera`` ``(B,)``: each sample's camera index (``None``: the first camera)."""
-        x, moved, found, demo_cells = self.tokens(demo, first)
+        x, moved, found, demo_cells, put, target = self.tokens(demo, first)
+        prior = found if target is None else torch.stack((found, target), dim=-1)
         if self.hand is None:
-            return PointerOutput(self.readout(x, head, prior=found, camera=camera), moved, found)
+            waypoints = self.readout(x, head, prior=prior, camera=camera)
+            return PointerOutput(waypoints, moved, found, None, put, target)
         path, hand = self.hand_path(demo_cells, moved, found)
-        waypoints = self.readout(x, head, prior=found, camera=camera, path=path)
-        return PointerOutput(waypoints, moved, found, hand)
+        waypoints = self.readout(x, head, prior=prior, camera=camera, path=path)
+        return PointerOutput(waypoints, moved, found, hand, put, target)
 
     def forward(
         self,

@@ -20,6 +20,15 @@ moves the task's object, :mod:`awda_bench.data.contact_point`; ``DataRecipe.iden
 which then label the rows that never grasp: Meta-World's pushes.
 With a demo hand path (``AwdaConfig.demo_hand_path``) a third cross-entropy labels the hand logits
 of every demo frame with the cell of the demonstrator's TCP in that frame (:func:`hand_loss`).
+With a place target (``AwdaConfig.place_target``) two more label where the object is put down
+(:func:`place_loss`)::
+
+    demo cell   where the demonstrator's TCP is when it lets go (its last grasping point, the
+                gripper open again after it), on the demo's first frame's grid -> CE on the put logits
+    o_1 cell    the same point of the agent trajectory, on o_1's grid       -> CE on the target logits
+
+over the task-driven rows whose demo and agent trajectory both let go (a synthesized trajectory's
+release is drawn at random, not read from its demo).
 A deviation from the reference, which trains on the Soft-DTW loss alone; it is stated where it is
 switched on (``AwdaConfig.identification_weight``, the recipe files).
 """
@@ -59,6 +68,21 @@ def grasp_cells(
         has_point = has_point | touched
     cells, ahead = point_cells(point, camera, grid)
     return cells, has_point & ahead
+
+
+def release_cells(
+    trajectory: torch.Tensor, camera: Camera, grid: tuple[int, int]
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``trajectory (B, P, 3 + k)`` -> the grid cell ``(B,)`` of each row's last grasping point
+    (where it lets go) seen through ``camera``, and ``(B,)`` bool: the row grasps, opens again
+    before its end, and the point is in front of the camera."""
+    grasping = trajectory[..., 3 + GRASP_ATTRIBUTE] > 0.5  # (B, P)
+    points = grasping.shape[1]
+    last = points - 1 - torch.argmax(grasping.flip(1).to(torch.int8), dim=1)
+    released = grasping.any(dim=1) & ~grasping[:, -1]
+    point = trajectory[torch.arange(len(trajectory)), last, :3]
+    cells, ahead = point_cells(point, camera, grid)
+    return cells, released & ahead
 
 
 def point_cells(
@@ -114,6 +138,43 @@ def hand_loss(
         return hand_logits.sum() * 0.0, {"id_hand": 0.0}
     loss = F.cross_entropy(hand_logits[ok], labels[ok])
     return loss, {"id_hand": float(loss.detach())}
+
+
+def place_loss(
+    put_logits: torch.Tensor,
+    target_logits: torch.Tensor,
+    demo_trajectory: torch.Tensor,
+    trajectory: torch.Tensor,
+    head: torch.Tensor,
+    cameras: Sequence[Camera],
+    camera: torch.Tensor | None,
+    grid: tuple[int, int],
+) -> tuple[torch.Tensor, dict[str, float]]:
+    """Mean of the two place cross-entropies (module docstring) over the task-driven rows
+    (``head == 0``) whose demo and agent trajectory both let go; zero (with the graph) when none
+    does. ``*_logits (B, h*w)``."""
+    b = len(trajectory)
+    index = torch.zeros(b, dtype=torch.long) if camera is None else camera.cpu()
+    demo_cell = torch.zeros(b, dtype=torch.long, device=trajectory.device)
+    agent_cell = torch.zeros_like(demo_cell)
+    rows = torch.zeros(b, dtype=torch.bool, device=trajectory.device)
+    for i in torch.unique(index).tolist():
+        mine = (index == i).to(trajectory.device)
+        demo_cell[mine], demo_ok = release_cells(demo_trajectory[mine], cameras[i], grid)
+        agent_cell[mine], agent_ok = release_cells(trajectory[mine], cameras[i], grid)
+        rows[mine] = demo_ok & agent_ok
+    rows = rows & (head == 0)
+    if not bool(rows.any()):
+        zero = (put_logits.sum() + target_logits.sum()) * 0.0
+        return zero, {"id_put": 0.0, "id_target": 0.0, "id_place_rows": 0.0}
+    put = F.cross_entropy(put_logits[rows], demo_cell[rows])
+    target = F.cross_entropy(target_logits[rows], agent_cell[rows])
+    info = {
+        "id_put": float(put.detach()),
+        "id_target": float(target.detach()),
+        "id_place_rows": float(rows.float().mean()),
+    }
+    return put + target, info
 
 
 def grasp_cells_per_camera(
