@@ -11,8 +11,15 @@ from training_helpers import FROZEN_LITE0, TINY_NET, recipe_toml
 
 from awda_bench.cli import main
 from awda_bench.data.datasets import AwdaPairDataset, CollectedData
+from awda_bench.models.agent_cameras import camera_fields
+from awda_bench.models.config import AwdaConfig, TrunkConfig
 from awda_bench.models.snapshot import list_snapshots
-from awda_bench.training.offline_waypoints import axis_bias_cm, other_task_partners, per_task_table
+from awda_bench.training.offline_waypoints import (
+    axis_bias_cm,
+    on_model_cameras,
+    other_task_partners,
+    per_task_table,
+)
 
 POINTER = {**TINY_NET, **FROZEN_LITE0, "head": "demo-pointer", "identification_weight": 1.0}
 
@@ -89,11 +96,36 @@ def test_per_task_table_prints_each_tasks_axis_bias() -> None:
             "task": task, "task_name": f"t{task}", "wp_err_cm": abs(dz) * 100, "end_err_cm": 0.0,
             "grasp_pred": False, "grasp_true": False, "grasp_err_cm": np.nan,
             "demo_copy_cm": 0.0, "true_shift_cm": 0.0, "demo_effect_cm": np.nan,
-            "object_near": np.nan, "moved_near": np.nan,
-            "predicted": true + [0.0, 0.0, dz], "true": true,
+            "object_near": np.nan, "moved_near": np.nan, "target_near": float(task == 6),
+            "put_near": np.nan, "predicted": true + [0.0, 0.0, dz], "true": true,
         }  # fmt: skip
 
     table = per_task_table([row(6, 0.09), row(6, 0.07), row(7, -0.01)])
     assert table.loc["t6", "bias_z_cm"] == pytest.approx(8.0)
     assert table.loc["t7", "bias_z_cm"] == pytest.approx(-1.0)
     assert table.loc["t6", "bias_x_cm"] == pytest.approx(0.0)
+    assert table.loc["t6", "target_near"] == 1.0 and table.loc["t7", "target_near"] == 0.0
+
+
+def test_the_pairs_index_their_cameras_among_the_snapshots() -> None:
+    """Pairs that were all filmed by the snapshot's second camera (MOSAIC's stack block: door and
+    drawer are filmed from the other side) take index 1, the rays they were trained on, not 0."""
+    first = (np.eye(3) * 200.0, np.hstack((np.eye(3), np.zeros((3, 1)))))
+    second = (first[0], np.hstack((np.eye(3), np.array([[0.0], [0.1], [0.8]]))))
+
+    class Pairs:  # AwdaPairDataset's camera bookkeeping over two pairs of one scene camera
+        data = None
+        _filmed = [second, second]
+        cameras, pair_camera = [second], [0, 0]
+        index_cameras = AwdaPairDataset.index_cameras  # the real indexing
+
+    pairs = Pairs()
+    pointer = TrunkConfig(
+        backbone="efficientnet-lite0", backbone_stride=16, freeze_backbone=True,
+        head="demo-pointer", attention_head_dim=8,
+    )  # fmt: skip
+    config = AwdaConfig(trunk=pointer, **camera_fields([first, second], (240, 320)))
+    on_model_cameras(pairs, config)  # type: ignore[arg-type]
+    assert pairs.pair_camera == [1, 1]
+    on_model_cameras(pairs, AwdaConfig(trunk=pointer))  # no cameras: left as they are
+    assert pairs.pair_camera == [1, 1]

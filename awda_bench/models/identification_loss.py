@@ -140,6 +140,24 @@ def hand_loss(
     return loss, {"id_hand": float(loss.detach())}
 
 
+def release_cells_per_camera(
+    trajectory: torch.Tensor,
+    cameras: Sequence[Camera],
+    camera: torch.Tensor | None,
+    grid: tuple[int, int],
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """:func:`release_cells` with each row seen through its own camera: ``cameras[camera[i]]``
+    (``camera`` ``None``: every row through the first)."""
+    b = len(trajectory)
+    index = torch.zeros(b, dtype=torch.long) if camera is None else camera.cpu()
+    cells = torch.zeros(b, dtype=torch.long, device=trajectory.device)
+    ok = torch.zeros(b, dtype=torch.bool, device=trajectory.device)
+    for i in torch.unique(index).tolist():
+        rows = (index == i).to(trajectory.device)
+        cells[rows], ok[rows] = release_cells(trajectory[rows], cameras[i], grid)
+    return cells, ok
+
+
 def place_loss(
     put_logits: torch.Tensor,
     target_logits: torch.Tensor,
@@ -153,17 +171,9 @@ def place_loss(
     """Mean of the two place cross-entropies (module docstring) over the task-driven rows
     (``head == 0``) whose demo and agent trajectory both let go; zero (with the graph) when none
     does. ``*_logits (B, h*w)``."""
-    b = len(trajectory)
-    index = torch.zeros(b, dtype=torch.long) if camera is None else camera.cpu()
-    demo_cell = torch.zeros(b, dtype=torch.long, device=trajectory.device)
-    agent_cell = torch.zeros_like(demo_cell)
-    rows = torch.zeros(b, dtype=torch.bool, device=trajectory.device)
-    for i in torch.unique(index).tolist():
-        mine = (index == i).to(trajectory.device)
-        demo_cell[mine], demo_ok = release_cells(demo_trajectory[mine], cameras[i], grid)
-        agent_cell[mine], agent_ok = release_cells(trajectory[mine], cameras[i], grid)
-        rows[mine] = demo_ok & agent_ok
-    rows = rows & (head == 0)
+    demo_cell, demo_ok = release_cells_per_camera(demo_trajectory, cameras, camera, grid)
+    agent_cell, agent_ok = release_cells_per_camera(trajectory, cameras, camera, grid)
+    rows = demo_ok & agent_ok & (head == 0)
     if not bool(rows.any()):
         zero = (put_logits.sum() + target_logits.sum()) * 0.0
         return zero, {"id_put": 0.0, "id_target": 0.0, "id_place_rows": 0.0}

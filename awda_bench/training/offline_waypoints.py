@@ -34,6 +34,8 @@ trajectory (:func:`awda_bench.waypoints.extract_waypoints`), per task::
     moved_near       (and what-moved softmax over the demo) peaks within one cell (Chebyshev) of
                      the identification label: the first grasp, or where the hand first moves the
                      object on a task without one (:mod:`awda_bench.data.contact_point`)
+    target_near      ``place_target`` snapshots: the same of the target softmax over o_1 (and the
+    put_near         put softmax over the demo) against where the trajectory lets go
 
 Frozen-trunk snapshots only (the features come from the collection's feature cache, built if
 missing).
@@ -52,8 +54,13 @@ import torch
 
 from awda_bench.data.datasets import AwdaPairDataset, CollectedData, Selection
 from awda_bench.errors import UsageError
+from awda_bench.models.agent_cameras import config_cameras
 from awda_bench.models.awda_net import AwdaNet
-from awda_bench.models.identification_loss import grasp_cells_per_camera
+from awda_bench.models.config import AwdaConfig
+from awda_bench.models.identification_loss import (
+    grasp_cells_per_camera,
+    release_cells_per_camera,
+)
 from awda_bench.models.snapshot import load_snapshot
 from awda_bench.training.feature_cache import load_or_build
 from awda_bench.training.feature_datasets import CachedAwdaPairs, frames_needed
@@ -62,11 +69,15 @@ from awda_bench.waypoints import extract_waypoints
 BATCH = 64
 """Pairs per forward pass."""
 
+NEAR_COLUMNS = ("object_near", "moved_near", "target_near", "put_near")
+"""The identification softmaxes' hit rates (module docstring); the place ones NaN without a place
+target."""
+
 
 def _near_label(model: AwdaNet, batch: dict[str, torch.Tensor], n: int) -> dict[str, list[float]]:
     """Per pair, whether the pointer's object / what-moved softmax peaks within one cell of its
     identification label (NaN without a label or without a pointer)."""
-    near = {"object_near": [np.nan] * n, "moved_near": [np.nan] * n}
+    near = {key: [np.nan] * n for key in NEAR_COLUMNS}
     pointer = getattr(model.scene_head, "pointer", None)
     if pointer is None:
         return near
@@ -74,13 +85,22 @@ def _near_label(model: AwdaNet, batch: dict[str, torch.Tensor], n: int) -> dict[
     demo, first = model.cached_maps(batch["demo_features"], batch["first_frame_features"])
     out = pointer(demo, first, torch.zeros_like(batch["head"]), camera)
     width = model.grid[1]
-    for key, logits, trajectory, contact in (
+    labels = [
         ("object_near", out.object_logits, batch["trajectory"], batch["contact"]),
         ("moved_near", out.moved_logits, batch["demo_trajectory"], batch["demo_contact"]),
-    ):
-        cells, ok = grasp_cells_per_camera(
-            trajectory, model.ray_cameras, camera, model.grid, contact
-        )
+    ]
+    if out.target_logits is not None and out.put_logits is not None:
+        labels += [
+            ("target_near", out.target_logits, batch["trajectory"], None),
+            ("put_near", out.put_logits, batch["demo_trajectory"], None),
+        ]
+    for key, logits, trajectory, contact in labels:
+        if key in ("target_near", "put_near"):
+            cells, ok = release_cells_per_camera(trajectory, model.ray_cameras, camera, model.grid)
+        else:
+            cells, ok = grasp_cells_per_camera(
+                trajectory, model.ray_cameras, camera, model.grid, contact
+            )
         for j, (want, got) in enumerate(
             zip(cells.tolist(), logits.argmax(1).tolist(), strict=True)
         ):
@@ -134,6 +154,14 @@ def _largest_set(model: AwdaNet, demo: torch.Tensor, batch: dict[str, Any], n: i
     return model.waypoint_sets(raw)[-1].numpy()
 
 
+def on_model_cameras(pairs: AwdaPairDataset, config: AwdaConfig) -> None:
+    """Index every pair's camera among the snapshot's (the list its training saw), not among the
+    pairs' own: a subset filmed by one of several cameras (MOSAIC's stack block: the second)
+    would otherwise vote on, and project its labels through, the first camera's rays."""
+    if config.num_cameras:
+        pairs.index_cameras(config_cameras(config))
+
+
 def pair_rows(
     snapshot: Path, data_dir: Path, tasks: Sequence[int] = (), threads: int | None = None
 ) -> list[dict[str, Any]]:
@@ -160,6 +188,7 @@ def pair_rows(
         raise UsageError(
             f"{data_dir} holds no (agent, demonstrator) pairs of tasks {list(tasks) or 'any'}"
         )
+    on_model_cameras(pairs, model.config)
     samples = CachedAwdaPairs(
         pairs, load_or_build(data, trunk, frames_needed(pairs), progress=False)
     )
@@ -199,8 +228,7 @@ def pair_rows(
                     "demo_copy_cm": _mean_distance_cm(predicted[:, :3], demo_true),
                     "true_shift_cm": _mean_distance_cm(true, demo_true),
                     "demo_effect_cm": demo_effect,
-                    "object_near": near["object_near"][n],
-                    "moved_near": near["moved_near"][n],
+                    **{key: near[key][n] for key in NEAR_COLUMNS},
                     "predicted": predicted[:, :3],
                     "true": true,
                 })  # fmt: skip
@@ -243,8 +271,7 @@ def per_task_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
             "true_shift_cm": frame["true_shift_cm"].median(),
             "demo_effect_cm": frame["demo_effect_cm"].median(),
             **dict(zip(("bias_x_cm", "bias_y_cm", "bias_z_cm"), axis_bias_cm(group), strict=True)),
-            "object_near": frame["object_near"].mean(),
-            "moved_near": frame["moved_near"].mean(),
+            **{key: frame[key].mean() for key in NEAR_COLUMNS},
         })  # fmt: skip
     every = pd.DataFrame(rows)
     table.append({
