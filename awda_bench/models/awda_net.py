@@ -80,6 +80,8 @@ class AwdaNet(nn.Module):
                 offset_m=config.ray_offset_m,
                 hand_path=config.demo_hand_path,
                 place_target=config.place_target,
+                place_pool=config.place_target_pool,
+                place_match=config.place_target_match,
             )
             self.grid = shape.grid
             if trunk.head == "demo-pointer":

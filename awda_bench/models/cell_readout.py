@@ -109,6 +109,11 @@ class CellHeadShape:
     place_target: bool = False
     """The head identifies where the object goes as it identifies the object (a second prior:
     :mod:`awda_bench.models.demo_pointer`)."""
+    place_pool: bool = True
+    """``place_target``: compare 3x3 max-pooled neighbourhoods (False: the cells themselves)."""
+    place_match: bool = False
+    """``place_target``: the target logits are a learned multiple of the cosine between each o_1
+    cell's and the demo's target appearance."""
 
 
 class CellReadout(nn.Module):

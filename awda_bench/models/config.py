@@ -215,6 +215,15 @@ class AwdaConfig:
     in another scene is elsewhere (MOSAIC's carries: every grasped target released ~15-19 cm off,
     reports/learned/mosaic-small20-*/carry.md). Needs ``identification_weight > 0`` (the place
     loss shares its weight). A deviation: the reference has no identification losses."""
+    place_target_pool: bool = True
+    """``place_target``: compare each cell's 3x3 max-pooled neighbourhood (a release point images
+    a cell or two off the target it hovers over); False: the cells themselves, as the object is
+    identified."""
+    place_target_match: bool = False
+    """``place_target``: the target logit of an o_1 cell is a learned multiple of the cosine
+    between its appearance and the demo's target's, not a learned score: a comparison that needs
+    no training on the target's kind (leave-one-family-out: the held-out family's targets are of
+    a kind no training family puts things on)."""
     ray_offset_m: float = 0.05
     """Cell heads voting on camera rays: how far [m] a cell's vote may move horizontally off its
     ray (``cell_readout``). 0.05: a waypoint is where the cells it points at are. Larger lets a
@@ -417,6 +426,8 @@ AWDA_TABLE_FIELDS: tuple[str, ...] = (
     "ray_offset_m",
     "demo_hand_path",
     "place_target",
+    "place_target_pool",
+    "place_target_match",
     "points_per_segment",
     "gamma",
     "attribute_scale",
