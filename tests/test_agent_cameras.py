@@ -15,7 +15,12 @@ from awda_bench.errors import UsageError
 from awda_bench.models.agent_cameras import camera_fields, camera_index, config_cameras
 from awda_bench.models.cell_readout import CellHeadShape, CellReadout
 from awda_bench.models.config import AwdaConfig, TrunkConfig
-from awda_bench.models.identification_loss import grasp_cells, grasp_cells_per_camera
+from awda_bench.models.identification_loss import (
+    grasp_cells,
+    grasp_cells_per_camera,
+    release_cells,
+    release_cells_per_camera,
+)
 from awda_bench.policies.awda_policy import check_camera
 from awda_bench.training.run import agent_cameras
 
@@ -118,6 +123,14 @@ def test_the_identification_labels_project_each_row_through_its_camera() -> None
     side_cells, _ = grasp_cells(trajectory, cameras[1], GRID)
     table_cells, _ = grasp_cells(trajectory, cameras[0], GRID)
     assert cells.tolist() == [int(side_cells[0]), int(table_cells[1]), int(side_cells[2])]
+    assert int(side_cells[0]) != int(table_cells[0]) and bool(ok.all())
+    # where each row lets go (the place target's labels), through its camera too
+    trajectory[:, 5, 3] = 0.0
+    trajectory[:, 4, :3] = torch.tensor([0.05, -0.05, 0.08])
+    cells, ok = release_cells_per_camera(trajectory, cameras, torch.tensor([0, 1, 1]), GRID)
+    side_cells, _ = release_cells(trajectory, cameras[1], GRID)
+    table_cells, _ = release_cells(trajectory, cameras[0], GRID)
+    assert cells.tolist() == [int(table_cells[0]), int(side_cells[1]), int(side_cells[2])]
     assert int(side_cells[0]) != int(table_cells[0]) and bool(ok.all())
 
 

@@ -35,12 +35,16 @@ switched on (``AwdaConfig.identification_weight``, the recipe files).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import torch
 import torch.nn.functional as F
 
 from awda_bench.models.cell_readout import Camera
+
+Labels = tuple[torch.Tensor, torch.Tensor]
+"""``(cells (B,), ok (B,))``: a label cell per row and whether the row has one."""
+
 
 GRASP_ATTRIBUTE = 0
 """Index of *object grasped* among a trajectory's attribute channels (``AwdaConfig``)."""
@@ -148,14 +152,7 @@ def release_cells_per_camera(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """:func:`release_cells` with each row seen through its own camera: ``cameras[camera[i]]``
     (``camera`` ``None``: every row through the first)."""
-    b = len(trajectory)
-    index = torch.zeros(b, dtype=torch.long) if camera is None else camera.cpu()
-    cells = torch.zeros(b, dtype=torch.long, device=trajectory.device)
-    ok = torch.zeros(b, dtype=torch.bool, device=trajectory.device)
-    for i in torch.unique(index).tolist():
-        rows = (index == i).to(trajectory.device)
-        cells[rows], ok[rows] = release_cells(trajectory[rows], cameras[i], grid)
-    return cells, ok
+    return _per_camera(trajectory, cameras, camera, lambda t, c, _: release_cells(t, c, grid))
 
 
 def place_loss(
@@ -174,17 +171,8 @@ def place_loss(
     demo_cell, demo_ok = release_cells_per_camera(demo_trajectory, cameras, camera, grid)
     agent_cell, agent_ok = release_cells_per_camera(trajectory, cameras, camera, grid)
     rows = demo_ok & agent_ok & (head == 0)
-    if not bool(rows.any()):
-        zero = (put_logits.sum() + target_logits.sum()) * 0.0
-        return zero, {"id_put": 0.0, "id_target": 0.0, "id_place_rows": 0.0}
-    put = F.cross_entropy(put_logits[rows], demo_cell[rows])
-    target = F.cross_entropy(target_logits[rows], agent_cell[rows])
-    info = {
-        "id_put": float(put.detach()),
-        "id_target": float(target.detach()),
-        "id_place_rows": float(rows.float().mean()),
-    }
-    return put + target, info
+    names = ("id_put", "id_target", "id_place_rows")
+    return _paired_cross_entropy(put_logits, target_logits, demo_cell, agent_cell, rows, names)
 
 
 def grasp_cells_per_camera(
@@ -196,15 +184,28 @@ def grasp_cells_per_camera(
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """:func:`grasp_cells` with each row seen through its own camera: ``cameras[camera[i]]``
     (``camera`` ``None``: every row through the first)."""
+
+    def label(rows: torch.Tensor, seen_by: Camera, where: torch.Tensor) -> Labels:
+        return grasp_cells(rows, seen_by, grid, None if contact is None else contact[where])
+
+    return _per_camera(trajectory, cameras, camera, label)
+
+
+def _per_camera(
+    trajectory: torch.Tensor,
+    cameras: Sequence[Camera],
+    camera: torch.Tensor | None,
+    label: Callable[[torch.Tensor, Camera, torch.Tensor], Labels],
+) -> Labels:
+    """``label(rows of trajectory, their camera, the rows' mask)`` for the rows of each camera
+    ``cameras[camera[i]]`` (``camera`` ``None``: every row through the first), put together."""
     if camera is None or len(cameras) == 1:
-        return grasp_cells(trajectory, cameras[0], grid, contact)
+        return label(trajectory, cameras[0], torch.ones(len(trajectory), dtype=torch.bool))
     cells = torch.zeros(len(trajectory), dtype=torch.long, device=trajectory.device)
     ok = torch.zeros(len(trajectory), dtype=torch.bool, device=trajectory.device)
     for index in torch.unique(camera).tolist():
         rows = camera == index
-        cells[rows], ok[rows] = grasp_cells(
-            trajectory[rows], cameras[index], grid, None if contact is None else contact[rows]
-        )
+        cells[rows], ok[rows] = label(trajectory[rows], cameras[index], rows)
     return cells, ok
 
 
@@ -228,14 +229,24 @@ def identification_loss(
     )
     agent_cell, agent_ok = grasp_cells_per_camera(trajectory, cameras, camera, grid, contact)
     rows = demo_ok & agent_ok
+    names = ("id_moved", "id_object", "id_rows")
+    return _paired_cross_entropy(moved_logits, object_logits, demo_cell, agent_cell, rows, names)
+
+
+def _paired_cross_entropy(
+    demo_logits: torch.Tensor,
+    agent_logits: torch.Tensor,
+    demo_cell: torch.Tensor,
+    agent_cell: torch.Tensor,
+    rows: torch.Tensor,
+    names: tuple[str, str, str],
+) -> tuple[torch.Tensor, dict[str, float]]:
+    """The demo's and o_1's cross-entropies over ``rows`` (zero, with the graph, when there is
+    none) and their logged values under ``names`` (demo, o_1, the rows' fraction)."""
     if not bool(rows.any()):
-        zero = (moved_logits.sum() + object_logits.sum()) * 0.0
-        return zero, {"id_moved": 0.0, "id_object": 0.0, "id_rows": 0.0}
-    moved = F.cross_entropy(moved_logits[rows], demo_cell[rows])
-    found = F.cross_entropy(object_logits[rows], agent_cell[rows])
-    info = {
-        "id_moved": float(moved.detach()),
-        "id_object": float(found.detach()),
-        "id_rows": float(rows.float().mean()),
-    }
-    return moved + found, info
+        zero = (demo_logits.sum() + agent_logits.sum()) * 0.0
+        return zero, dict.fromkeys(names, 0.0)
+    demo = F.cross_entropy(demo_logits[rows], demo_cell[rows])
+    agent = F.cross_entropy(agent_logits[rows], agent_cell[rows])
+    values = (float(demo.detach()), float(agent.detach()), float(rows.float().mean()))
+    return demo + agent, dict(zip(names, values, strict=True))
