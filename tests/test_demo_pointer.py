@@ -278,33 +278,60 @@ def _apart(h: int, w: int, g: torch.Generator) -> torch.Tensor:
             return cells
 
 
-def _stacks(pairs: list[tuple[int, int]], n: int, seed: int) -> tuple[torch.Tensor, ...]:
-    """Synthetic stacking demos: three cube kinds (fixed feature vectors) at random cells of a
-    6 x 8 grid, two or more cells apart (the scenes keep their cubes 11 cm apart, 3-5 cells);
-    the demo carries cube ``a`` onto cube ``b``, which stays where it is; o_1 shows the three at
-    other such cells. Labels: ``b``'s cell in the demo and in o_1."""
+def _stacks(
+    pairs: list[tuple[int, int]], n: int, seed: int, kinds: int = 3
+) -> tuple[torch.Tensor, ...]:
+    """Synthetic stacking demos over ``kinds`` cube kinds (fixed feature vectors): each scene
+    shows the carried kind ``a``, the base kind ``b`` and one more at random cells of a 6 x 8
+    grid, two or more cells apart (the scenes keep their cubes 11 cm apart, 3-5 cells); the demo
+    carries ``a`` onto ``b``, which stays where it is; o_1 shows the three at other such cells.
+    Labels: ``b``'s cell in the demo and in o_1."""
     g = torch.Generator().manual_seed(seed)
-    kinds = torch.randn(3, 8, generator=torch.Generator().manual_seed(321)) * 2
+    features = torch.randn(kinds, 8, generator=torch.Generator().manual_seed(321)) * 2
     h, w, frames = 6, 8, 5
     demo = 0.1 * torch.randn(n, frames, 8, h, w, generator=g)
     first = 0.1 * torch.randn(n, 8, h, w, generator=g)
     put_cell, target_cell = torch.empty(n, dtype=torch.long), torch.empty(n, dtype=torch.long)
     for i in range(n):
         a, b = pairs[int(torch.randint(len(pairs), (1,), generator=g))]
+        others = [k for k in range(kinds) if k not in (a, b)]
+        shown = (a, b, others[int(torch.randint(len(others), (1,), generator=g))])
         demo_cells, first_cells = _apart(h, w, g), _apart(h, w, g)
-        for kind in range(3):
-            r, c = divmod(int(first_cells[kind]), w)
-            first[i, :, r, c] += kinds[kind]
-            r, c = divmod(int(demo_cells[kind]), w)
-            if kind != a:
-                demo[i, :, :, r, c] += kinds[kind]
+        rb, cb = divmod(int(demo_cells[1]), w)
+        for j, kind in enumerate(shown):
+            r, c = divmod(int(first_cells[j]), w)
+            first[i, :, r, c] += features[kind]
+            r, c = divmod(int(demo_cells[j]), w)
+            if j:
+                demo[i, :, :, r, c] += features[kind]
                 continue
-            rb, cb = divmod(int(demo_cells[b]), w)
-            for t in range(frames):  # carried from (r, c) onto b
+            for t in range(frames):  # carried from (r, c) onto the base
                 f = t / (frames - 1)
-                demo[i, t, :, round(r + f * (rb - r)), round(c + f * (cb - c))] += kinds[kind]
-        put_cell[i], target_cell[i] = demo_cells[b], first_cells[b]
+                demo[i, t, :, round(r + f * (rb - r)), round(c + f * (cb - c))] += features[kind]
+        put_cell[i], target_cell[i] = demo_cells[1], first_cells[1]
     return demo, first, put_cell, target_cell
+
+
+def _place_found(
+    head: DemoPointer, seen: list[tuple[int, int]], held_out: list[tuple[int, int]], kinds: int
+) -> float:
+    """Train ``head``'s put and target softmaxes on ``seen`` pairs (200 steps of 32), then the
+    fraction of 300 ``held_out`` scenes whose target softmax peaks on the base."""
+    opt = torch.optim.Adam(head.parameters(), 3e-3)
+    for step in range(200):
+        demo, first, put_cell, target_cell = _stacks(seen, 32, step, kinds)
+        tokens = head.tokens(demo, first)
+        assert tokens.put is not None and tokens.target is not None
+        loss = F.cross_entropy(tokens.put, put_cell) + F.cross_entropy(tokens.target, target_cell)
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    head.eval()
+    demo, first, _, target_cell = _stacks(held_out, 300, 10_000, kinds)
+    with torch.no_grad():
+        target = head.tokens(demo, first).target
+    assert target is not None
+    return float((target.argmax(1) == target_cell).float().mean())
 
 
 def test_the_place_target_finds_the_destination_of_an_unseen_pairing() -> None:
@@ -319,21 +346,8 @@ def test_the_place_target_finds_the_destination_of_an_unseen_pairing() -> None:
         waypoints=5, waypoint_dim=4, num_heads=2, place_target=True,
     )  # fmt: skip
     head = DemoPointer(shape)
-    opt = torch.optim.Adam(head.parameters(), 3e-3)
-    for step in range(150):
-        demo, first, put_cell, target_cell = _stacks(seen, 32, seed=step)
-        tokens = head.tokens(demo, first)
-        assert tokens.put is not None and tokens.target is not None
-        loss = F.cross_entropy(tokens.put, put_cell) + F.cross_entropy(tokens.target, target_cell)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-    head.eval()
-    demo, first, _, target_cell = _stacks(held_out, 200, seed=10_000)
-    with torch.no_grad():
-        target = head.tokens(demo, first).target
-    assert target is not None
-    assert float((target.argmax(1) == target_cell).float().mean()) >= 0.9
+    assert _place_found(head, seen, held_out, kinds=3) >= 0.9
+    demo, first, _, _ = _stacks(held_out, 2, 0)
     # the readout takes both priors, and only a place-target readout takes two
     with torch.no_grad():
         out = head.pointer(demo[:2], first[:2], torch.zeros(2).long())
@@ -387,35 +401,6 @@ def test_the_place_loss_labels_task_rows_that_let_go() -> None:
     assert float(zero) == 0.0 and zero.requires_grad
 
 
-def _kind_stacks(pairs: list[tuple[int, int]], n: int, seed: int) -> tuple[torch.Tensor, ...]:
-    """As :func:`_stacks` over eight kinds: each scene shows the carried kind, the base kind and
-    one more, and the labels are the base's cells."""
-    g = torch.Generator().manual_seed(seed)
-    kinds = torch.randn(8, 8, generator=torch.Generator().manual_seed(321)) * 2
-    h, w, frames = 6, 8, 5
-    demo = 0.1 * torch.randn(n, frames, 8, h, w, generator=g)
-    first = 0.1 * torch.randn(n, 8, h, w, generator=g)
-    put_cell, target_cell = torch.empty(n, dtype=torch.long), torch.empty(n, dtype=torch.long)
-    for i in range(n):
-        a, b = pairs[int(torch.randint(len(pairs), (1,), generator=g))]
-        others = [k for k in range(8) if k not in (a, b)]
-        shown = (a, b, others[int(torch.randint(len(others), (1,), generator=g))])
-        demo_cells, first_cells = _apart(h, w, g), _apart(h, w, g)
-        rb, cb = divmod(int(demo_cells[1]), w)
-        for j, kind in enumerate(shown):
-            r, c = divmod(int(first_cells[j]), w)
-            first[i, :, r, c] += kinds[kind]
-            r, c = divmod(int(demo_cells[j]), w)
-            if j:
-                demo[i, :, :, r, c] += kinds[kind]
-                continue
-            for t in range(frames):  # carried from (r, c) onto the base
-                f = t / (frames - 1)
-                demo[i, t, :, round(r + f * (rb - r)), round(c + f * (cb - c))] += kinds[kind]
-        put_cell[i], target_cell[i] = demo_cells[1], first_cells[1]
-    return demo, first, put_cell, target_cell
-
-
 def test_the_place_targets_cosine_finds_a_kind_of_target_never_trained_on() -> None:
     """Leave-one-family-out in miniature: bases of kinds 0-5 in training, of kinds 6 and 7 held
     out. Scored by the cosine between o_1's cells and the demo's target (``place_match``, cells
@@ -430,18 +415,4 @@ def test_the_place_targets_cosine_finds_a_kind_of_target_never_trained_on() -> N
     )  # fmt: skip
     head = DemoPointer(shape)
     assert head.target_logit is None and head.target_match is not None
-    opt = torch.optim.Adam(head.parameters(), 3e-3)
-    for step in range(200):
-        demo, first, put_cell, target_cell = _kind_stacks(train, 32, seed=step)
-        tokens = head.tokens(demo, first)
-        assert tokens.put is not None and tokens.target is not None
-        loss = F.cross_entropy(tokens.put, put_cell) + F.cross_entropy(tokens.target, target_cell)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-    head.eval()
-    demo, first, _, target_cell = _kind_stacks(held_out, 300, seed=10_000)
-    with torch.no_grad():
-        target = head.tokens(demo, first).target
-    assert target is not None
-    assert float((target.argmax(1) == target_cell).float().mean()) >= 0.6
+    assert _place_found(head, train, held_out, kinds=8) >= 0.6
