@@ -85,7 +85,7 @@ def _near_label(model: AwdaNet, batch: dict[str, torch.Tensor], n: int) -> dict[
     demo, first = model.cached_maps(batch["demo_features"], batch["first_frame_features"])
     out = pointer(demo, first, torch.zeros_like(batch["head"]), camera)
     width = model.grid[1]
-    labels = [
+    labels: list[tuple[str, torch.Tensor, torch.Tensor, torch.Tensor | None]] = [
         ("object_near", out.object_logits, batch["trajectory"], batch["contact"]),
         ("moved_near", out.moved_logits, batch["demo_trajectory"], batch["demo_contact"]),
     ]
