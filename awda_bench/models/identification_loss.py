@@ -27,8 +27,9 @@ With a place target (``AwdaConfig.place_target``) two more label where the objec
                 gripper open again after it), on the demo's first frame's grid -> CE on the put logits
     o_1 cell    the same point of the agent trajectory, on o_1's grid       -> CE on the target logits
 
-over the task-driven rows whose demo and agent trajectory both let go (a synthesized trajectory's
-release is drawn at random, not read from its demo).
+over the task-driven rows whose demo and agent trajectory both let go (a synthesized trajectory
+never grasps on the ManiSkill suites, and on Meta-World lets go at a drawn point, not where its
+demo did).
 A deviation from the reference, which trains on the Soft-DTW loss alone; it is stated where it is
 switched on (``AwdaConfig.identification_weight``, the recipe files).
 """
