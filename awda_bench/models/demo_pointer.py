@@ -100,9 +100,20 @@ def _demo_logits(inputs: int, hidden: int) -> nn.Sequential:
     )
 
 
+def _point_in_demo(
+    convs: nn.Module, demo_cells: torch.Tensor, start: torch.Tensor
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """``convs`` (:func:`_demo_logits`) over the embedded demo frames ``(B, Td, d, h, w)`` -> their
+    logits ``(B, h*w)`` and what ``start`` ``(B, d, h, w)`` (the demo's first frame, as read)
+    holds where they point, softmax-weighted ``(B, d)``."""
+    b, t, d, h, w = demo_cells.shape
+    logits = convs(demo_cells.reshape(b, t * d, h, w)).flatten(1)
+    return logits, torch.einsum("bl,bdl->bd", torch.softmax(logits, dim=1), start.flatten(2))
+
+
 def _pool3(cells: torch.Tensor) -> torch.Tensor:
-    """``(B, d, h, w)`` -> each cell's 3x3 neighbourhood mean, same shape (zeros beyond the
-    border)."""
+    """``(B, d, h, w)`` -> each cell's 3x3 neighbourhood maximum per channel, same shape (the
+    border padded so that it never wins)."""
     return F.max_pool2d(cells, kernel_size=3, stride=1, padding=1)
 
 
@@ -192,20 +203,14 @@ class DemoPointer(nn.Module):
     def what_moved(self, demo_cells: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Embedded demo frames ``(B, Td, d, h, w)`` -> the what-moved logits ``(B, h*w)`` and
         ``g`` ``(B, d)``: the demo's first frame where they point (module docstring)."""
-        b, t, d, h, w = demo_cells.shape
-        logits = self.moved(demo_cells.reshape(b, t * d, h, w)).flatten(1)
-        start = demo_cells[:, 0].flatten(2)  # (B, d, L): the demo's first frame
-        return logits, torch.einsum("bl,bdl->bd", torch.softmax(logits, dim=1), start)
+        return _point_in_demo(self.moved, demo_cells, demo_cells[:, 0])
 
     def where_put(self, demo_cells: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Embedded demo frames ``(B, Td, d, h, w)`` -> the put logits ``(B, h*w)`` and ``q``
         ``(B, d)``: the demo's first frame around where they point (module docstring)."""
         if self.put is None:
             raise ValueError("this head was built without a place target (place_target)")
-        b, t, d, h, w = demo_cells.shape
-        logits = self.put(demo_cells.reshape(b, t * d, h, w)).flatten(1)
-        start = self._around(demo_cells[:, 0]).flatten(2)  # (B, d, L)
-        return logits, torch.einsum("bl,bdl->bd", torch.softmax(logits, dim=1), start)
+        return _point_in_demo(self.put, demo_cells, self._around(demo_cells[:, 0]))
 
     def _around(self, cells: torch.Tensor) -> torch.Tensor:
         """``(B, d, h, w)`` -> what the place target compares: each cell's 3x3 neighbourhood

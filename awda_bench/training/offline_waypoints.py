@@ -75,8 +75,8 @@ target."""
 
 
 def _near_label(model: AwdaNet, batch: dict[str, torch.Tensor], n: int) -> dict[str, list[float]]:
-    """Per pair, whether the pointer's object / what-moved softmax peaks within one cell of its
-    identification label (NaN without a label or without a pointer)."""
+    """Per pair, whether each of the pointer's identification softmaxes (:data:`NEAR_COLUMNS`)
+    peaks within one cell of its label (NaN without a label, a pointer, or a place target)."""
     near = {key: [np.nan] * n for key in NEAR_COLUMNS}
     pointer = getattr(model.scene_head, "pointer", None)
     if pointer is None:
@@ -85,22 +85,21 @@ def _near_label(model: AwdaNet, batch: dict[str, torch.Tensor], n: int) -> dict[
     demo, first = model.cached_maps(batch["demo_features"], batch["first_frame_features"])
     out = pointer(demo, first, torch.zeros_like(batch["head"]), camera)
     width = model.grid[1]
-    labels: list[tuple[str, torch.Tensor, torch.Tensor, torch.Tensor | None]] = [
-        ("object_near", out.object_logits, batch["trajectory"], batch["contact"]),
-        ("moved_near", out.moved_logits, batch["demo_trajectory"], batch["demo_contact"]),
-    ]
+    cameras, grid = model.ray_cameras, model.grid
+    labels = [
+        ("object_near", out.object_logits,
+         grasp_cells_per_camera(batch["trajectory"], cameras, camera, grid, batch["contact"])),
+        ("moved_near", out.moved_logits, grasp_cells_per_camera(
+            batch["demo_trajectory"], cameras, camera, grid, batch["demo_contact"])),
+    ]  # fmt: skip
     if out.target_logits is not None and out.put_logits is not None:
         labels += [
-            ("target_near", out.target_logits, batch["trajectory"], None),
-            ("put_near", out.put_logits, batch["demo_trajectory"], None),
-        ]
-    for key, logits, trajectory, contact in labels:
-        if key in ("target_near", "put_near"):
-            cells, ok = release_cells_per_camera(trajectory, model.ray_cameras, camera, model.grid)
-        else:
-            cells, ok = grasp_cells_per_camera(
-                trajectory, model.ray_cameras, camera, model.grid, contact
-            )
+            ("target_near", out.target_logits,
+             release_cells_per_camera(batch["trajectory"], cameras, camera, grid)),
+            ("put_near", out.put_logits,
+             release_cells_per_camera(batch["demo_trajectory"], cameras, camera, grid)),
+        ]  # fmt: skip
+    for key, logits, (cells, ok) in labels:
         for j, (want, got) in enumerate(
             zip(cells.tolist(), logits.argmax(1).tolist(), strict=True)
         ):
