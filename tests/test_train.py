@@ -133,3 +133,41 @@ def test_cosine_schedule_sets_each_steps_step_size_and_resumes_on_the_same_curve
     assert resumed.start_step == 2 and resumed.losses == full.losses[2:]
     with pytest.raises(UsageError, match="lr_schedule"):
         TrainConfig(lr_schedule="linear")
+
+
+def test_bf16_precision_runs_the_forward_in_bfloat16_and_keeps_weights_and_losses_float32(
+    tmp_path: Path,
+) -> None:
+    data = SyntheticWaypointDataset(6, height_px=64, width_px=64, demo_frames=1)
+    cfg = TrainConfig(batch_size=2, max_steps=3, snapshot_every_steps=3, seed=3, device="cpu")
+    low = TrainConfig(**{**cfg.__dict__, "precision": "bf16"})
+    # what the forward pass ran in: the waypoints the pointer emits before the float32 cast
+    model = _model(0)
+    seen: list[torch.dtype] = []
+    for module in model.modules():
+        if isinstance(module, torch.nn.Linear):
+            module.register_forward_hook(lambda _m, _i, out: seen.append(out.dtype))
+    low_run = train(model, data, low, tmp_path / "bf16")
+    assert seen and set(seen) == {torch.bfloat16}
+    full_run = train(_model(0), data, cfg, tmp_path / "fp32")
+    assert all(torch.isfinite(torch.tensor(low_run.losses)))
+    # the same first step to bfloat16's precision (the curves then drift apart), not bit-identical
+    assert low_run.losses[0] == pytest.approx(full_run.losses[0], rel=0.02)
+    assert low_run.losses != full_run.losses
+    snap = load_snapshot(list_snapshots(tmp_path / "bf16")[-1])
+    assert {v.dtype for v in snap.model_state.values() if v.is_floating_point()} == {torch.float32}
+    # resuming a bf16 run continues its own curve bit for bit
+    first = train(_model(0), data, TrainConfig(**{**low.__dict__, "max_steps": 2}), tmp_path / "s")
+    resumed = train(_model(99), data, low, tmp_path / "s")
+    assert first.losses + resumed.losses == low_run.losses
+    with pytest.raises(UsageError, match="precision"):
+        TrainConfig(precision="fp16")
+
+
+def test_bf16_precision_is_refused_for_a_network_other_than_awda() -> None:
+    from awda_bench.training.loop import check_precision
+
+    check_precision("bf16", "awda")
+    check_precision("fp32", "tosvi")
+    with pytest.raises(UsageError, match="AWDA network only"):
+        check_precision("bf16", "tosvi")

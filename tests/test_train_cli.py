@@ -354,6 +354,29 @@ def test_a_cosine_recipe_reaches_the_loop_and_logs_its_step_size(
         load_recipe(str(bad))
 
 
+def test_a_bf16_recipe_trains_awda_and_is_refused_for_tosvi_before_anything_is_written(
+    tiny: Path, recipe: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    low = recipe.parent / "tiny-bf16.toml"
+    low.write_text(f'extends = "{recipe.name}"\nname = "tiny-bf16"\n[train]\nprecision = "bf16"\n')
+    out = tmp_path / "ckpt"
+    args = ["--method", "awda", "--data", str(tiny), "--out", str(out), "--recipe", str(low)]
+    assert _train(*args, "--steps", "2", "--snapshot-every", "2") == 0
+    snap = load_snapshot(list_snapshots(out)[-1])
+    assert snap.training is not None and snap.training["recipe"]["train"]["precision"] == "bf16"
+    steps, loss = read_metrics(out / "metrics.csv")[("train", "loss")]
+    assert steps == [1, 2] and all(math.isfinite(v) for v in loss)
+    refused = tmp_path / "tosvi"
+    tosvi = ("--method", "tosvi", "--data", str(tiny), "--out", str(refused), "--recipe", str(low))
+    assert _train(*tosvi) != 0
+    assert "AWDA network only" in capsys.readouterr().err
+    assert not refused.exists()
+    bad = recipe.parent / "tiny-bf16-bad.toml"
+    bad.write_text(f'extends = "{recipe.name}"\nname = "bad"\n[train]\nprecision = "fp16"\n')
+    with pytest.raises(UsageError, match="precision"):
+        load_recipe(str(bad))
+
+
 @pytest.mark.slow
 def test_resume_after_a_kill_continues_the_identical_curve(
     tiny: Path, recipe: Path, tmp_path: Path

@@ -189,7 +189,11 @@ class AwdaNet(nn.Module):
     def compute_loss(
         self, batch: Mapping[str, torch.Tensor]
     ) -> tuple[torch.Tensor, dict[str, float]]:
-        """The multi-waypoint Soft-DTW loss of a batch (format in the module docstring)."""
+        """The multi-waypoint Soft-DTW loss of a batch (format in the module docstring).
+
+        Under a caller's ``torch.autocast`` (``[train] precision = "bf16"``) only the network's
+        forward pass runs in the lower precision: its outputs are cast to float32 and every loss
+        (Soft-DTW, the identification cross-entropies) is computed with autocast off."""
         cfg = self.config
         pointed: PointerOutput | None = None
         camera = self.camera_indices(batch.get("camera"), len(batch["trajectory"]))
@@ -202,52 +206,57 @@ class AwdaNet(nn.Module):
             waypoints = pointed.waypoints
         else:
             waypoints = self.forward_features(demo, first, batch["head"], camera)
-        loss, per_set = multi_waypoint_sdtw_loss(
-            waypoints,
-            batch["trajectory"],
-            num_sets=cfg.num_waypoint_sets,
-            points_per_segment=cfg.points_per_segment,
-            gamma=cfg.gamma,
-            attribute_scale=cfg.attribute_scale,
-        )
-        info = {f"sdtw_set{j + 1}": float(v) for j, v in enumerate(per_set.detach())}
+        # the losses in float32 whatever the forward pass ran in (Soft-DTW's gamma is 1e-3)
+        waypoints = waypoints.float()
         if pointed is not None:
-            found, found_info = identification_loss(
-                pointed.moved_logits,
-                pointed.object_logits,
-                batch["demo_trajectory"],
+            pointed = PointerOutput._make(t.float() if t is not None else None for t in pointed)
+        with torch.autocast(waypoints.device.type, enabled=False):
+            loss, per_set = multi_waypoint_sdtw_loss(
+                waypoints,
                 batch["trajectory"],
-                self.ray_cameras,  # AwdaConfig checks there is one
-                camera,
-                self.grid,
-                demo_contact=batch.get("demo_contact"),
-                contact=batch.get("contact"),
+                num_sets=cfg.num_waypoint_sets,
+                points_per_segment=cfg.points_per_segment,
+                gamma=cfg.gamma,
+                attribute_scale=cfg.attribute_scale,
             )
-            loss = loss + cfg.identification_weight * found
-            info.update(found_info)
-            if pointed.hand_logits is not None:
-                hand, hand_info = hand_loss(
-                    pointed.hand_logits,
-                    batch["demo_trajectory"],
-                    self.ray_cameras,
-                    camera,
-                    self.grid,
-                )
-                loss = loss + cfg.identification_weight * hand
-                info.update(hand_info)
-            if pointed.put_logits is not None and pointed.target_logits is not None:
-                place, place_info = place_loss(
-                    pointed.put_logits,
-                    pointed.target_logits,
+            info = {f"sdtw_set{j + 1}": float(v) for j, v in enumerate(per_set.detach())}
+            if pointed is not None:
+                found, found_info = identification_loss(
+                    pointed.moved_logits,
+                    pointed.object_logits,
                     batch["demo_trajectory"],
                     batch["trajectory"],
-                    batch["head"].long(),
-                    self.ray_cameras,
+                    self.ray_cameras,  # AwdaConfig checks there is one
                     camera,
                     self.grid,
+                    demo_contact=batch.get("demo_contact"),
+                    contact=batch.get("contact"),
                 )
-                loss = loss + cfg.identification_weight * place
-                info.update(place_info)
+                loss = loss + cfg.identification_weight * found
+                info.update(found_info)
+                if pointed.hand_logits is not None:
+                    hand, hand_info = hand_loss(
+                        pointed.hand_logits,
+                        batch["demo_trajectory"],
+                        self.ray_cameras,
+                        camera,
+                        self.grid,
+                    )
+                    loss = loss + cfg.identification_weight * hand
+                    info.update(hand_info)
+                if pointed.put_logits is not None and pointed.target_logits is not None:
+                    place, place_info = place_loss(
+                        pointed.put_logits,
+                        pointed.target_logits,
+                        batch["demo_trajectory"],
+                        batch["trajectory"],
+                        batch["head"].long(),
+                        self.ray_cameras,
+                        camera,
+                        self.grid,
+                    )
+                    loss = loss + cfg.identification_weight * place
+                    info.update(place_info)
         return loss, {"loss": float(loss.detach()), **info}
 
     def waypoint_sets(self, waypoints: torch.Tensor) -> list[torch.Tensor]:

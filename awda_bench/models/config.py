@@ -39,6 +39,9 @@ CELL_HEADS: tuple[str, ...] = ("demo-to-scene", "demo-pointer")
 DEVICE_CHOICES: tuple[str, ...] = ("auto", "cpu", "cuda")
 LR_SCHEDULES: tuple[str, ...] = ("constant", "cosine")
 """Step-size schedules of the training loop (``TrainConfig.lr_schedule``)."""
+PRECISIONS: tuple[str, ...] = ("fp32", "bf16")
+"""The training forward pass's arithmetic (``TrainConfig.precision``): ``fp32`` throughout, or
+``bf16`` autocast for the forward pass (weights, gradients, Adam and the losses stay float32)."""
 """``auto`` picks CUDA when ``torch.cuda.is_available()``, else the CPU."""
 
 
@@ -551,6 +554,9 @@ class TrainConfig:
     """``constant`` (Table S2) or ``cosine``: the step size at 0-based step ``s`` is
     ``learning_rate * (1 + cos(pi * s / max_steps)) / 2``
     (:func:`awda_bench.training.loop.learning_rate_at`)."""
+    precision: str = "fp32"
+    """``fp32`` or ``bf16``: the forward pass under ``torch.autocast(dtype=torch.bfloat16)``
+    (:data:`PRECISIONS`; the AWDA network only, whose losses stay float32)."""
 
     def __post_init__(self) -> None:
         o = "TrainConfig"
@@ -573,6 +579,9 @@ class TrainConfig:
             "lr_schedule",
             self.lr_schedule,
             f"one of {LR_SCHEDULES}",
+        )
+        check_field(
+            self.precision in PRECISIONS, o, "precision", self.precision, f"one of {PRECISIONS}"
         )
 
 

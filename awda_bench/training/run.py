@@ -59,6 +59,7 @@ from awda_bench.training.logbook import Logbook, plot_learning_curve
 from awda_bench.training.loop import (
     SampleDataset,
     TrainResult,
+    check_precision,
     moving_average,
     resolve_device,
     train,
@@ -665,6 +666,7 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
     recipe = load_recipe(request.recipe)
     device = resolve_device(request.device)
     sources, recipe = _open_sources(request, recipe, column)  # the suite's tables applied
+    check_precision(recipe.train.precision, column.arch)  # before any feature is encoded
     recipe = recipe.with_schedule(request.steps, request.snapshot_every, request.seed)
     if request.threads is not None:
         torch.set_num_threads(request.threads)
@@ -687,6 +689,7 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
         resume=resuming,
         ema_decay=t.ema_decay,
         lr_schedule=t.lr_schedule,
+        precision=t.precision,
     )
     averaged = moving_average(model, t.ema_decay) if t.ema_decay > 0 else None
     val_dataset = samples.val_dataset
