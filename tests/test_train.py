@@ -164,10 +164,29 @@ def test_bf16_precision_runs_the_forward_in_bfloat16_and_keeps_weights_and_losse
         TrainConfig(precision="fp16")
 
 
-def test_bf16_precision_is_refused_for_a_network_other_than_awda() -> None:
-    from awda_bench.training.loop import check_precision
+def test_bf16_precision_trains_tosvi_with_a_bfloat16_forward_and_float32_losses(
+    tmp_path: Path,
+) -> None:
+    from awda_bench.models.config import TosviConfig
+    from awda_bench.models.synthetic import SyntheticActionDataset
+    from awda_bench.models.tosvi_net import TosviNet
 
-    check_precision("bf16", "awda")
-    check_precision("fp32", "tosvi")
-    with pytest.raises(UsageError, match="AWDA network only"):
-        check_precision("bf16", "tosvi")
+    def tosvi(seed: int) -> TosviNet:
+        torch.manual_seed(seed)
+        trunk = TrunkConfig(
+            image_height_px=64, image_width_px=64, demo_frames=1, backbone_weights="none"
+        )
+        return TosviNet(TosviConfig(trunk=trunk, frame_stack=2))
+
+    data = SyntheticActionDataset(4, height_px=64, width_px=64, demo_frames=1, frame_stack=2)
+    cfg = TrainConfig(batch_size=2, max_steps=2, snapshot_every_steps=2, seed=1, device="cpu")
+    model = tosvi(0)
+    seen: list[torch.dtype] = []
+    for module in model.modules():
+        if isinstance(module, torch.nn.Linear):
+            module.register_forward_hook(lambda _m, _i, out: seen.append(out.dtype))
+    low = train(model, data, TrainConfig(**{**cfg.__dict__, "precision": "bf16"}), tmp_path / "a")
+    assert seen and set(seen) == {torch.bfloat16}
+    full = train(tosvi(0), data, cfg, tmp_path / "b")
+    assert all(torch.isfinite(torch.tensor(low.losses)))
+    assert low.losses[0] == pytest.approx(full.losses[0], rel=0.02) and low.losses != full.losses

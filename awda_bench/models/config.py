@@ -556,7 +556,7 @@ class TrainConfig:
     (:func:`awda_bench.training.loop.learning_rate_at`)."""
     precision: str = "fp32"
     """``fp32`` or ``bf16``: the forward pass under ``torch.autocast(dtype=torch.bfloat16)``
-    (:data:`PRECISIONS`; the AWDA network only, whose losses stay float32)."""
+    (:data:`PRECISIONS`; the networks' losses stay float32)."""
 
     def __post_init__(self) -> None:
         o = "TrainConfig"

@@ -254,6 +254,9 @@ class TosviNet(nn.Module):
         (0 with ``frame_stack = 1``: no pairs).
 
         NLLs are summed over action dimensions and averaged over samples (and pairs) [nats].
+        Under a caller's ``torch.autocast`` (``[train] precision = "bf16"``) only the forward pass
+        runs in the lower precision: the mixture parameters are cast to float32 and the NLLs are
+        computed with autocast off.
         """
         if "demo_features" in batch:  # a frozen backbone's cached features
             policy, inverse = self.forward_features(
@@ -261,13 +264,15 @@ class TosviNet(nn.Module):
             )
         else:
             policy, inverse = self(batch["demo"], batch["frames"], batch.get("depth"))
+        policy, inverse = policy.float(), inverse.float()
         actions = batch["actions"]
-        policy_nll = -self.distribution(policy).log_prob(actions[:, -1]).sum(-1).mean()
-        if inverse.shape[1] == 0:  # frame_stack 1: no consecutive pairs, no inverse model
-            inverse_nll = policy_nll.new_zeros(())
-        else:
-            inverse_nll = -self.distribution(inverse).log_prob(actions[:, :-1]).sum(-1).mean()
-        loss = policy_nll + self.config.inverse_loss_weight * inverse_nll
+        with torch.autocast(policy.device.type, enabled=False):
+            policy_nll = -self.distribution(policy).log_prob(actions[:, -1]).sum(-1).mean()
+            if inverse.shape[1] == 0:  # frame_stack 1: no consecutive pairs, no inverse model
+                inverse_nll = policy_nll.new_zeros(())
+            else:
+                inverse_nll = -self.distribution(inverse).log_prob(actions[:, :-1]).sum(-1).mean()
+            loss = policy_nll + self.config.inverse_loss_weight * inverse_nll
         return loss, {
             "loss": float(loss.detach()),
             "policy_nll": float(policy_nll.detach()),

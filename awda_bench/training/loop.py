@@ -30,7 +30,6 @@ from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from torch.utils.data import default_collate
 
 from awda_bench.errors import CorruptFileError, UsageError
-from awda_bench.models.architectures import arch_of
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import TrainConfig
 from awda_bench.models.snapshot import (
@@ -97,15 +96,6 @@ def _seed_everything(seed: int) -> None:
     random.seed(seed)
 
 
-def check_precision(precision: str, arch: str) -> None:
-    """Refuse ``bf16`` for a network other than AWDA's (whose losses stay float32 under it)."""
-    if precision == "bf16" and arch != "awda":
-        raise UsageError(
-            f"[train] precision bf16 trains the AWDA network only, not {arch!r}; "
-            'set precision = "fp32" in the recipe for this column'
-        )
-
-
 def moving_average(model: AwdaNet | TosviNet, decay: float) -> AveragedModel:
     """An exponential moving average of ``model``'s weights and buffers (PyTorch's
     ``AveragedModel``; the first update copies the weights). ``.module`` is the averaged model."""
@@ -153,7 +143,7 @@ def train(
     :func:`learning_rate_at` and ``info`` also holds ``lr``.
 
     With ``config.precision`` ``bf16`` the forward pass runs under ``torch.autocast`` (bfloat16);
-    :meth:`AwdaNet.compute_loss` keeps its losses in float32, and the weights and Adam are float32.
+    the networks' ``compute_loss`` keep their losses in float32, and the weights and Adam are float32.
 
     With ``config.ema_decay`` > 0 the snapshots hold a moving average of the weights
     (:func:`moving_average`, updated after every step; pass ``averaged`` to read it during
@@ -161,7 +151,6 @@ def train(
     """
     if len(dataset) == 0:
         raise UsageError("the training dataset is empty")
-    check_precision(config.precision, arch_of(model))
     low_precision = config.precision == "bf16"
     snapshot_dir = Path(snapshot_dir)
     device = resolve_device(config.device)

@@ -147,7 +147,7 @@ class TrainRecipe:
     ``torch.autocast(dtype=torch.bfloat16)``; the weights, gradients, Adam and the losses stay
     float32, and validation, snapshots and evaluation are float32. For CPUs with bfloat16
     arithmetic (AVX512-BF16, AMX): 1.8x fewer seconds a Full-1 step on the 2-core EPYC of
-    sessions 39-42; a CPU without it emulates bf16 and gets slower. T-OSVI is refused."""
+    sessions 39-42; a CPU without it emulates bf16 and gets slower."""
 
     def __post_init__(self) -> None:
         o = "recipe train"

@@ -59,7 +59,6 @@ from awda_bench.training.logbook import Logbook, plot_learning_curve
 from awda_bench.training.loop import (
     SampleDataset,
     TrainResult,
-    check_precision,
     moving_average,
     resolve_device,
     train,
@@ -666,7 +665,6 @@ def _run_training(request: TrainRequest) -> TrainOutcome:
     recipe = load_recipe(request.recipe)
     device = resolve_device(request.device)
     sources, recipe = _open_sources(request, recipe, column)  # the suite's tables applied
-    check_precision(recipe.train.precision, column.arch)  # before any feature is encoded
     recipe = recipe.with_schedule(request.steps, request.snapshot_every, request.seed)
     if request.threads is not None:
         torch.set_num_threads(request.threads)
