@@ -146,8 +146,8 @@ class TrainRecipe:
     """``fp32`` (the reference) or ``bf16``: the AWDA network's training forward pass under
     ``torch.autocast(dtype=torch.bfloat16)``; the weights, gradients, Adam and the losses stay
     float32, and validation, snapshots and evaluation are float32. For CPUs with bfloat16
-    arithmetic (AVX512-BF16, AMX): 1.8x fewer seconds a Full-1 step on the 2-core EPYC of
-    sessions 39-42; a CPU without it emulates bf16 and gets slower."""
+    arithmetic (AVX512-BF16, AMX): a Full-1 Meta-World step 0.084 s against 0.143-0.155 in
+    float32 on the 2-core EPYC of sessions 39-42 (docs/training.md); a CPU without it emulates bf16 and gets slower."""
 
     def __post_init__(self) -> None:
         o = "recipe train"
