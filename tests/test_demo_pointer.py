@@ -17,6 +17,7 @@ from awda_bench.models.identification_loss import (
     demo_frame_points,
     grasp_cells,
     hand_loss,
+    height_loss,
     place_loss,
     release_cells,
 )
@@ -416,3 +417,51 @@ def test_the_place_targets_cosine_finds_a_kind_of_target_never_trained_on() -> N
     head = DemoPointer(shape)
     assert head.target_logit is None and head.target_match is not None
     assert _place_found(head, train, held_out, kinds=8) >= 0.6
+
+
+def test_demo_heights_carry_the_demos_hand_height_into_every_waypoint() -> None:
+    """With ``demo_heights`` a waypoint's height follows the demo's hand heights: raising every
+    demo frame's height by 7 cm raises every waypoint by 7 cm (the cells' own votes unchanged),
+    and a readout built with them refuses to run without."""
+    torch.manual_seed(0)
+    grid = (6, 8)
+    camera = (torch.tensor(K), torch.tensor(E), (240, 320))
+    shape = CellHeadShape(
+        channels=8, grid=grid, demo_frames=4, dim=16, dropout=0.0, hidden=32,
+        waypoints=5, waypoint_dim=4, num_heads=2, cameras=(camera,), demo_heights=True,
+    )  # fmt: skip
+    readout = DemoPointer(shape).readout.eval()
+    with torch.no_grad():
+        readout.height_phase.normal_()  # each waypoint its own blend of the frames
+    x, head = torch.randn(2, 48, 16), torch.tensor([0, 1])
+    prior = torch.zeros(2, 48)
+    heights = 0.1 * torch.rand(2, 4)
+    with torch.no_grad():
+        low = readout(x, head, prior=prior, heights=heights)
+        high = readout(x, head, prior=prior, heights=heights + 0.07)
+    assert torch.allclose(high[..., 2] - low[..., 2], torch.full((2, 5), 0.07), atol=1e-5)
+    assert not torch.allclose(high[..., :2], low[..., :2])  # each point moved along its ray
+    with pytest.raises(ValueError, match="demo_heights"):
+        readout(x, head, prior=prior)
+
+
+def test_demo_heights_train_with_the_identification_loss() -> None:
+    """The height loss labels the hand height read off each demo frame with the demonstrator's
+    TCP z there; its gradient reaches the look and the per-waypoint blend, and the config asks
+    for the identification loss it shares a weight with."""
+    with pytest.raises(UsageError, match="demo_heights"):
+        AwdaConfig(trunk=POINTER_TRUNK, demo_heights=True, **CAMERA)
+    config = AwdaConfig(trunk=POINTER_TRUNK, identification_weight=1.0, demo_heights=True, **CAMERA)
+    model = AwdaNet(config, load_backbone_weights=False)
+    batch = _grasping_batch()
+    loss, info = model.compute_loss(batch)
+    assert info["id_height"] > 0 and info["id_height_err_cm"] > 0
+    loss.backward()
+    head = model.scene_head
+    assert isinstance(head, DemoPointer) and head.height_look is not None
+    assert head.height_look[0].weight.grad is not None
+    assert head.readout.height_phase.grad is not None
+    # a perfect reading costs nothing: heights equal to the TCP z at each demo frame
+    truth = demo_frame_points(batch["demo_trajectory"], 10)[..., 2]
+    zero, _ = height_loss(truth, batch["demo_trajectory"])
+    assert float(zero) == 0.0

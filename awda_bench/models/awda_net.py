@@ -39,7 +39,12 @@ from awda_bench.models.config import CELL_HEADS, AwdaConfig
 from awda_bench.models.demo_pointer import DemoPointer, PointerOutput
 from awda_bench.models.demo_to_scene import DemoToScene
 from awda_bench.models.frame_encoder import feature_map_size
-from awda_bench.models.identification_loss import hand_loss, identification_loss, place_loss
+from awda_bench.models.identification_loss import (
+    hand_loss,
+    height_loss,
+    identification_loss,
+    place_loss,
+)
 from awda_bench.models.trunk import VisualTrunk
 from awda_bench.models.waypoint_loss import multi_waypoint_sdtw_loss, split_waypoint_sets
 
@@ -79,6 +84,7 @@ class AwdaNet(nn.Module):
                 height_offset_m=config.ray_height_offset_m,
                 offset_m=config.ray_offset_m,
                 hand_path=config.demo_hand_path,
+                demo_heights=config.demo_heights,
                 place_target=config.place_target,
                 place_pool=config.place_target_pool,
                 place_match=config.place_target_match,
@@ -244,6 +250,12 @@ class AwdaNet(nn.Module):
                     )
                     loss = loss + cfg.identification_weight * hand
                     info.update(hand_info)
+                if pointed.demo_heights is not None:
+                    height, height_info = height_loss(
+                        pointed.demo_heights, batch["demo_trajectory"]
+                    )
+                    loss = loss + cfg.identification_weight * height
+                    info.update(height_info)
                 if pointed.put_logits is not None and pointed.target_logits is not None:
                     place, place_info = place_loss(
                         pointed.put_logits,

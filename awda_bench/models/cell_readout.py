@@ -22,6 +22,12 @@ With a demo hand path (``hand_path``: the demo's hand positions relative to the 
     p_j = softmax over cells of  ... - c_j |cell xy - q_j|^2    (c_j learned per waypoint, from 0)
     v_j(cell) = MLP_j([x(cell), cell x, y, r_1 .. r_Td])
 
+With demo heights (``demo_heights``: the demonstrator's hand height read off each demo frame,
+``zeta`` ``(Td,)`` [m], :mod:`awda_bench.models.demo_pointer`), a waypoint's height is no longer one
+number shared by every task::
+
+    z_j = z_j0 + sum_t softmax(phase_j)_t zeta_t      (z_j0, phase_j learned per head and waypoint)
+
 The rays make the choice learnable: from the first step, moving p_j towards the cells that image a
 point moves the waypoint towards that point (free xyz votes start equal, and the loss then only
 sees their mean). The reference also went through its camera: it predicted image-plane
@@ -114,6 +120,9 @@ class CellHeadShape:
     place_match: bool = False
     """``place_target``: the target logits are a learned multiple of the cosine between each o_1
     cell's and the demo's target appearance."""
+    demo_heights: bool = False
+    """The readout takes the demonstrator's hand height per demo frame, and each waypoint's
+    height follows a learned blend of them (module docstring; needs ``cameras``)."""
 
 
 class CellReadout(nn.Module):
@@ -140,6 +149,11 @@ class CellReadout(nn.Module):
             self.register_buffer("ray_origin", torch.stack([o for o, _ in rays]).float())
             self.register_buffer("ray_direction", torch.stack([d for _, d in rays]).float())
             self.height = nn.Parameter(torch.full((num_heads, waypoints), INITIAL_HEIGHT_M))
+        self.demo_heights = shape.demo_heights
+        if shape.demo_heights:
+            if not cameras:
+                raise ValueError("demo heights need ray votes (cameras)")
+            self.height_phase = nn.Parameter(torch.zeros(num_heads, waypoints, shape.demo_frames))
         self.where_logits = nn.ModuleList(nn.Linear(dim, waypoints) for _ in range(num_heads))
         self.prior_weight = nn.Parameter(torch.zeros(num_heads, waypoints)) if prior else None
         self.place_target = prior and shape.place_target
@@ -173,13 +187,23 @@ class CellReadout(nn.Module):
                 state_dict[key] = state_dict[key].unsqueeze(0)
         super()._load_from_state_dict(state_dict, prefix, *args)
 
-    def _ray_points(self, votes: torch.Tensor, head: int, camera: torch.Tensor) -> torch.Tensor:
+    def _ray_points(
+        self,
+        votes: torch.Tensor,
+        head: int,
+        camera: torch.Tensor,
+        heights: torch.Tensor | None = None,
+    ) -> torch.Tensor:
         """Raw votes ``(b, L, N, 3 + k)`` read as (z, dx, dy, attributes) on the rays of each
         sample's ``camera`` ``(b,)`` -> attributed points: a waypoint's height is its own
-        parameter plus at most ``height_offset_m`` from the cell (and the point at most
-        ``offset_m`` off its ray horizontally), so that votes start ordered along the image (a free height per
-        cell would scatter them)."""
-        height = self.height[head].view(-1, 1)  # (N, 1)
+        parameter (plus, with ``heights`` ``(b, Td)``, its blend of the demo's hand heights) plus
+        at most ``height_offset_m`` from the cell (and the point at most ``offset_m`` off its ray
+        horizontally), so that votes start ordered along the image (a free height per cell would
+        scatter them)."""
+        height = self.height[head].view(1, 1, -1, 1)  # (1, 1, N, 1)
+        if heights is not None:
+            phase = torch.softmax(self.height_phase[head], dim=-1)  # (N, Td)
+            height = height + (heights @ phase.T)[:, None, :, None]  # (b, 1, N, 1)
         z = height + self.height_offset_m * torch.tanh(votes[..., :1])
         offset, attributes = votes[..., 1:3], votes[..., 3:]
         direction = self.ray_direction[camera][:, :, None, :]  # (b, L, 1, 3)
@@ -231,8 +255,15 @@ class CellReadout(nn.Module):
         prior: torch.Tensor | None = None,
         camera: torch.Tensor | None = None,
         path: HandPath | None = None,
+        heights: torch.Tensor | None = None,
     ) -> torch.Tensor:
-        """``camera`` ``(B,)``: each sample's camera index (``None``: all the first)."""
+        """``camera`` ``(B,)``: each sample's camera index (``None``: all the first);
+        ``heights`` ``(B, Td)``: the demo's hand heights (a readout built with ``demo_heights``
+        takes them, and only such a one)."""
+        if (heights is None) == self.demo_heights:
+            raise ValueError(
+                "a readout built with demo_heights=True takes heights, and only such a one"
+            )
         b, cells = x.shape[:2]
         if camera is None:
             camera = torch.zeros(b, dtype=torch.long, device=x.device)
@@ -253,6 +284,8 @@ class CellReadout(nn.Module):
             )  # (b_i, L, N)
             votes = self.vote[i](values_in[rows]).view(-1, cells, self.waypoints, self.waypoint_dim)
             if self.rays:
-                votes = self._ray_points(votes, i, camera[rows])
+                votes = self._ray_points(
+                    votes, i, camera[rows], None if heights is None else heights[rows]
+                )
             out[rows] = torch.einsum("bln,blnk->bnk", where, votes)
         return out

@@ -227,6 +227,15 @@ class AwdaConfig:
     between its appearance and the demo's target's, not a learned score: a comparison that needs
     no training on the target's kind (leave-one-family-out: the held-out family's targets are of
     a kind no training family puts things on)."""
+    demo_heights: bool = False
+    """``demo-pointer`` head: each waypoint's height follows the demonstrator's hand heights,
+    read off the demo's frames (a learned look per frame and a regression, supervised like the
+    identification loss by the demo's own TCP z), through a learned blend per waypoint, instead of
+    one height parameter per waypoint shared by every task (plus each cell's vote, within
+    ``ray_height_offset_m``). Meta-World's held-out pushes: at one height per waypoint the
+    button-press and door-unlock waypoints sit 5-8 cm above their contact, at their training
+    siblings' heights (recipe-study-metaworld.md, V14). Needs ``identification_weight > 0`` (the
+    height loss shares its weight). A deviation: the reference has no such loss."""
     ray_offset_m: float = 0.05
     """Cell heads voting on camera rays: how far [m] a cell's vote may move horizontally off its
     ray (``cell_readout``). 0.05: a waypoint is where the cells it points at are. Larger lets a
@@ -311,6 +320,13 @@ class AwdaConfig:
             o,
             "demo_hand_path",
             self.demo_hand_path,
+            "false, or true with identification_weight > 0 (head 'demo-pointer', a camera)",
+        )
+        check_field(
+            not self.demo_heights or self.identification_weight > 0.0,
+            o,
+            "demo_heights",
+            self.demo_heights,
             "false, or true with identification_weight > 0 (head 'demo-pointer', a camera)",
         )
         check_field(
@@ -428,6 +444,7 @@ AWDA_TABLE_FIELDS: tuple[str, ...] = (
     "ray_height_offset_m",
     "ray_offset_m",
     "demo_hand_path",
+    "demo_heights",
     "place_target",
     "place_target_pool",
     "place_target_match",

@@ -64,6 +64,16 @@ With ``demo_hand_path`` (a deviation; ``AwdaConfig.demo_hand_path``)::
     is where the hand goes around its object, which appearance and per-cell history cannot carry
     to a scene whose object stands elsewhere.
 
+With ``demo_heights`` (a deviation; ``AwdaConfig.demo_heights``)::
+
+    height:   a_t(cell) = convs over e(demo_t) -> a logit per cell (where to look in frame t)
+              zeta_t = MLP([sum softmax(a_t) e(demo_t), mean e(demo_t), E_softmax(a_t)[cell xy]])
+              the demonstrator's hand height [m] in demo frame t (supervised: its TCP's z)
+    the readout sets each waypoint's height from a learned blend of the zeta_t
+    (:mod:`awda_bench.models.cell_readout`) instead of one number per waypoint: on Meta-World a
+    task's objects keep their heights across layouts, so the demonstrator's heights are the
+    agent's, and a held-out task's (a button 10 cm below its training sibling's) are in its demo.
+
 The third-person camera is the same for demonstrator and agent (a scene camera), so a cell of a
 demo frame and the same cell of o_1 image the same place on the table. What it keeps from the
 reference: frozen features shared by demo and agent frames, keypoints from a spatial softmax over
@@ -160,6 +170,9 @@ class PointerOutput(NamedTuple):
     """``(B, h*w)``: where in the demo the object was put down (``place_target`` heads)."""
     target_logits: torch.Tensor | None = None
     """``(B, h*w)``: which of o_1's cells it goes to (``place_target`` heads)."""
+    demo_heights: torch.Tensor | None = None
+    """``(B, Td)``: the demonstrator's hand height [m] read off each demo frame
+    (``demo_heights`` heads)."""
 
 
 class DemoPointer(nn.Module):
@@ -199,6 +212,18 @@ class DemoPointer(nn.Module):
             if shape.hand_path
             else None
         )
+        self.height_look = (
+            nn.Sequential(
+                nn.Conv2d(dim, narrow, kernel_size=1),
+                nn.GELU(),
+                nn.Conv2d(narrow, narrow, kernel_size=3, padding=1),
+                nn.GELU(),
+                nn.Conv2d(narrow, 1, kernel_size=1),
+            )
+            if shape.demo_heights
+            else None
+        )
+        self.height_value = _mlp(2 * dim + 2, hidden, 1, dropout) if shape.demo_heights else None
 
     def what_moved(self, demo_cells: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Embedded demo frames ``(B, Td, d, h, w)`` -> the what-moved logits ``(B, h*w)`` and
@@ -261,6 +286,20 @@ class DemoPointer(nn.Module):
         anchor = torch.softmax(found, dim=-1) @ xy
         return HandPath(hand - start[:, None], anchor), logits
 
+    def hand_heights(self, demo_cells: torch.Tensor) -> torch.Tensor:
+        """Embedded demo frames ``(B, Td, d, h, w)`` -> the demonstrator's hand height [m] in
+        each ``(B, Td)`` (module docstring)."""
+        if self.height_look is None or self.height_value is None:
+            raise ValueError("this head was built without demo heights (CellHeadShape)")
+        b, t, d, h, w = demo_cells.shape
+        frames = demo_cells.reshape(b * t, d, h, w)
+        look = torch.softmax(self.height_look(frames).flatten(1), dim=-1)  # (B*Td, L)
+        flat = frames.flatten(2)  # (B*Td, d, L)
+        seen = torch.einsum("nl,ndl->nd", look, flat)
+        where = look @ self.readout.cell_xy  # (B*Td, 2)
+        value = self.height_value(torch.cat((seen, flat.mean(-1), where), dim=-1))
+        return value.view(b, t)
+
     def pointer(
         self,
         demo: torch.Tensor,
@@ -271,12 +310,12 @@ class DemoPointer(nn.Module):
         """``camera`` ``(B,)``: each sample's camera index (``None``: the first camera)."""
         x, moved, found, demo_cells, put, target = self.tokens(demo, first)
         prior = found if target is None else torch.stack((found, target), dim=-1)
-        if self.hand is None:
-            waypoints = self.readout(x, head, prior=prior, camera=camera)
-            return PointerOutput(waypoints, moved, found, None, put, target)
-        path, hand = self.hand_path(demo_cells, moved, found)
-        waypoints = self.readout(x, head, prior=prior, camera=camera, path=path)
-        return PointerOutput(waypoints, moved, found, hand, put, target)
+        heights = None if self.height_look is None else self.hand_heights(demo_cells)
+        path = hand = None
+        if self.hand is not None:
+            path, hand = self.hand_path(demo_cells, moved, found)
+        waypoints = self.readout(x, head, prior=prior, camera=camera, path=path, heights=heights)
+        return PointerOutput(waypoints, moved, found, hand, put, target, heights)
 
     def forward(
         self,

@@ -20,6 +20,8 @@ moves the task's object, :mod:`awda_bench.data.contact_point`; ``DataRecipe.iden
 which then label the rows that never grasp: Meta-World's pushes.
 With a demo hand path (``AwdaConfig.demo_hand_path``) a third cross-entropy labels the hand logits
 of every demo frame with the cell of the demonstrator's TCP in that frame (:func:`hand_loss`).
+With demo heights (``AwdaConfig.demo_heights``) a Huber loss labels the hand height read off
+every demo frame with the demonstrator's TCP z there (:func:`height_loss`; not a cross-entropy).
 With a place target (``AwdaConfig.place_target``) two more label where the object is put down
 (:func:`place_loss`)::
 
@@ -143,6 +145,23 @@ def hand_loss(
         return hand_logits.sum() * 0.0, {"id_hand": 0.0}
     loss = F.cross_entropy(hand_logits[ok], labels[ok])
     return loss, {"id_hand": float(loss.detach())}
+
+
+HEIGHT_SCALE_M = 0.05
+"""The height loss's unit [m]: a Huber loss on heights in units of 5 cm (quadratic within 5 cm,
+linear beyond), so that it weighs as the cross-entropies beside it do."""
+
+
+def height_loss(
+    heights: torch.Tensor, demo_trajectory: torch.Tensor
+) -> tuple[torch.Tensor, dict[str, float]]:
+    """Huber loss of the demo-pointer's hand heights ``(B, Td)`` [m] against the demonstrator's
+    TCP z in each demo frame (:func:`demo_frame_points`), in units of :data:`HEIGHT_SCALE_M`;
+    also reports the mean absolute error [cm]."""
+    truth = demo_frame_points(demo_trajectory, heights.shape[1])[..., 2]
+    loss = F.smooth_l1_loss(heights / HEIGHT_SCALE_M, truth / HEIGHT_SCALE_M)
+    error_cm = float((heights - truth).abs().mean().detach()) * 100.0
+    return loss, {"id_height": float(loss.detach()), "id_height_err_cm": error_cm}
 
 
 def release_cells_per_camera(
