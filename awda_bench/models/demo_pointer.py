@@ -100,7 +100,7 @@ def _mlp(inputs: int, hidden: int, outputs: int, dropout: float) -> nn.Sequentia
 
 def _demo_logits(inputs: int, hidden: int) -> nn.Sequential:
     """Convolutions over the stacked demo frames' cells -> one logit per cell (what moved, where
-    it was put)."""
+    it was put; over one frame's cells: where the hand is, where to read its height)."""
     return nn.Sequential(
         nn.Conv2d(inputs, hidden, kernel_size=1),
         nn.GELU(),
@@ -201,28 +201,9 @@ class DemoPointer(nn.Module):
         self.target_match = nn.Parameter(torch.tensor(MATCH_SCALE)) if matching else None
         self.place_pool = shape.place_pool
         narrow = max(hidden // HAND_NARROWING, 1)  # it runs on every demo frame
-        self.hand = (
-            nn.Sequential(
-                nn.Conv2d(dim, narrow, kernel_size=1),
-                nn.GELU(),
-                nn.Conv2d(narrow, narrow, kernel_size=3, padding=1),
-                nn.GELU(),
-                nn.Conv2d(narrow, 1, kernel_size=1),
-            )
-            if shape.hand_path
-            else None
-        )
-        self.height_look = (
-            nn.Sequential(
-                nn.Conv2d(dim, narrow, kernel_size=1),
-                nn.GELU(),
-                nn.Conv2d(narrow, narrow, kernel_size=3, padding=1),
-                nn.GELU(),
-                nn.Conv2d(narrow, 1, kernel_size=1),
-            )
-            if shape.demo_heights
-            else None
-        )
+        # per demo frame, narrow: they run on every one (the same layers as _demo_logits')
+        self.hand = _demo_logits(dim, narrow) if shape.hand_path else None
+        self.height_look = _demo_logits(dim, narrow) if shape.demo_heights else None
         self.height_value = _mlp(2 * dim + 2, hidden, 1, dropout) if shape.demo_heights else None
 
     def what_moved(self, demo_cells: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
