@@ -446,20 +446,22 @@ def test_demo_heights_carry_the_demos_hand_height_into_every_waypoint() -> None:
 
 
 def test_demo_heights_train_with_the_identification_loss() -> None:
-    """The height loss labels the hand height read off each demo frame with the demonstrator's
-    TCP z there; its gradient reaches the look and the per-waypoint blend, and the config asks
-    for the identification loss it shares a weight with."""
+    """The height loss labels the hand height read off each demo frame (where the hand loss says
+    the hand is) with the demonstrator's TCP z there; its gradient reaches the hand, the height
+    regression and the per-waypoint blend, and the config asks for the identification loss it
+    shares a weight with."""
     with pytest.raises(UsageError, match="demo_heights"):
         AwdaConfig(trunk=POINTER_TRUNK, demo_heights=True, **CAMERA)
     config = AwdaConfig(trunk=POINTER_TRUNK, identification_weight=1.0, demo_heights=True, **CAMERA)
     model = AwdaNet(config, load_backbone_weights=False)
     batch = _grasping_batch()
     loss, info = model.compute_loss(batch)
-    assert info["id_height"] > 0 and info["id_height_err_cm"] > 0
+    assert info["id_height"] > 0 and info["id_height_err_cm"] > 0 and info["id_hand"] > 0
     loss.backward()
     head = model.scene_head
-    assert isinstance(head, DemoPointer) and head.height_look is not None
-    assert head.height_look[0].weight.grad is not None
+    assert isinstance(head, DemoPointer) and head.hand is not None
+    assert head.height_value is not None and head.height_value[0].weight.grad is not None
+    assert head.hand[0].weight.grad is not None
     assert head.readout.height_phase.grad is not None
     # a perfect reading costs nothing: heights equal to the TCP z at each demo frame
     truth = demo_frame_points(batch["demo_trajectory"], 10)[..., 2]

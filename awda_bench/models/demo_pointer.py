@@ -66,9 +66,10 @@ With ``demo_hand_path`` (a deviation; ``AwdaConfig.demo_hand_path``)::
 
 With ``demo_heights`` (a deviation; ``AwdaConfig.demo_heights``)::
 
-    height:   a_t(cell) = convs over e(demo_t) -> a logit per cell (where to look in frame t)
-              zeta_t = MLP([sum softmax(a_t) e(demo_t), mean e(demo_t), E_softmax(a_t)[cell xy]])
-              the demonstrator's hand height [m] in demo frame t (supervised: its TCP's z)
+    hand:     k_t(cell) as above (supervised: the demo's TCP projected onto frame t)
+    height:   zeta_t = MLP([sum softmax(k_t) e(demo_t), mean e(demo_t), E_softmax(k_t)[cell xy]])
+              the demonstrator's hand height [m] in demo frame t, read where its hand is
+              (supervised: its TCP's z)
     the readout sets each waypoint's height from a learned blend of the zeta_t
     (:mod:`awda_bench.models.cell_readout`) instead of one number per waypoint: on Meta-World a
     task's objects keep their heights across layouts, so the demonstrator's heights are the
@@ -165,7 +166,7 @@ class PointerOutput(NamedTuple):
     """``(B, h*w)``: which of o_1's cells holds that object."""
     hand_logits: torch.Tensor | None = None
     """``(B, Td, h*w)``: where the demonstrator's hand is in each demo frame (``hand_path``
-    heads; ``None`` otherwise)."""
+    and ``demo_heights`` heads; ``None`` otherwise)."""
     put_logits: torch.Tensor | None = None
     """``(B, h*w)``: where in the demo the object was put down (``place_target`` heads)."""
     target_logits: torch.Tensor | None = None
@@ -201,9 +202,10 @@ class DemoPointer(nn.Module):
         self.target_match = nn.Parameter(torch.tensor(MATCH_SCALE)) if matching else None
         self.place_pool = shape.place_pool
         narrow = max(hidden // HAND_NARROWING, 1)  # it runs on every demo frame
-        # per demo frame, narrow: they run on every one (the same layers as _demo_logits')
-        self.hand = _demo_logits(dim, narrow) if shape.hand_path else None
-        self.height_look = _demo_logits(dim, narrow) if shape.demo_heights else None
+        # where the hand is in each demo frame: narrow, it runs on every one
+        hand = shape.hand_path or shape.demo_heights
+        self.hand = _demo_logits(dim, narrow) if hand else None
+        self.follow_hand = shape.hand_path
         self.height_value = _mlp(2 * dim + 2, hidden, 1, dropout) if shape.demo_heights else None
 
     def what_moved(self, demo_cells: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
@@ -252,30 +254,33 @@ class DemoPointer(nn.Module):
         found_logits = self.object_logit(found)[..., 0]
         return CellTokens(self.norm(x), moved, found_logits, demo_cells, put, target_logits)
 
-    def hand_path(
-        self, demo_cells: torch.Tensor, moved: torch.Tensor, found: torch.Tensor
-    ) -> tuple[HandPath, torch.Tensor]:
-        """The demo's hand path relative to its moved object, o_1's object (module docstring),
-        and the hand logits ``(B, Td, h*w)``."""
+    def hand_logits(self, demo_cells: torch.Tensor) -> torch.Tensor:
+        """Embedded demo frames ``(B, Td, d, h, w)`` -> where the demonstrator's hand is in
+        each, logits ``(B, Td, h*w)``."""
         if self.hand is None:
-            raise ValueError("this head was built without a hand path (CellHeadShape.hand_path)")
+            raise ValueError("this head was built without a hand (hand_path, demo_heights)")
         b, t, d, h, w = demo_cells.shape
-        logits = self.hand(demo_cells.reshape(b * t, d, h, w)).view(b, t, h * w)
+        return self.hand(demo_cells.reshape(b * t, d, h, w)).view(b, t, h * w)
+
+    def hand_path(
+        self, hand_logits: torch.Tensor, moved: torch.Tensor, found: torch.Tensor
+    ) -> HandPath:
+        """The demo's hand path relative to its moved object and o_1's object (module
+        docstring), from the hand logits ``(B, Td, h*w)``."""
         xy = self.readout.cell_xy  # (L, 2)
-        hand = torch.softmax(logits, dim=-1) @ xy  # (B, Td, 2)
+        hand = torch.softmax(hand_logits, dim=-1) @ xy  # (B, Td, 2)
         start = torch.softmax(moved, dim=-1) @ xy  # (B, 2)
         anchor = torch.softmax(found, dim=-1) @ xy
-        return HandPath(hand - start[:, None], anchor), logits
+        return HandPath(hand - start[:, None], anchor)
 
-    def hand_heights(self, demo_cells: torch.Tensor) -> torch.Tensor:
-        """Embedded demo frames ``(B, Td, d, h, w)`` -> the demonstrator's hand height [m] in
-        each ``(B, Td)`` (module docstring)."""
-        if self.height_look is None or self.height_value is None:
+    def hand_heights(self, demo_cells: torch.Tensor, hand_logits: torch.Tensor) -> torch.Tensor:
+        """Embedded demo frames ``(B, Td, d, h, w)`` and their hand logits -> the
+        demonstrator's hand height [m] in each, ``(B, Td)`` (module docstring)."""
+        if self.height_value is None:
             raise ValueError("this head was built without demo heights (CellHeadShape)")
         b, t, d, h, w = demo_cells.shape
-        frames = demo_cells.reshape(b * t, d, h, w)
-        look = torch.softmax(self.height_look(frames).flatten(1), dim=-1)  # (B*Td, L)
-        flat = frames.flatten(2)  # (B*Td, d, L)
+        flat = demo_cells.reshape(b * t, d, h * w)
+        look = torch.softmax(hand_logits.reshape(b * t, h * w), dim=-1)
         seen = torch.einsum("nl,ndl->nd", look, flat)
         where = look @ self.readout.cell_xy  # (B*Td, 2)
         value = self.height_value(torch.cat((seen, flat.mean(-1), where), dim=-1))
@@ -291,10 +296,13 @@ class DemoPointer(nn.Module):
         """``camera`` ``(B,)``: each sample's camera index (``None``: the first camera)."""
         x, moved, found, demo_cells, put, target = self.tokens(demo, first)
         prior = found if target is None else torch.stack((found, target), dim=-1)
-        heights = None if self.height_look is None else self.hand_heights(demo_cells)
-        path = hand = None
+        hand = path = heights = None
         if self.hand is not None:
-            path, hand = self.hand_path(demo_cells, moved, found)
+            hand = self.hand_logits(demo_cells)
+            if self.follow_hand:
+                path = self.hand_path(hand, moved, found)
+            if self.height_value is not None:
+                heights = self.hand_heights(demo_cells, hand)
         waypoints = self.readout(x, head, prior=prior, camera=camera, path=path, heights=heights)
         return PointerOutput(waypoints, moved, found, hand, put, target, heights)
 
