@@ -22,6 +22,7 @@ from awda_bench.training.offline_waypoints import (
 )
 
 POINTER = {**TINY_NET, **FROZEN_LITE0, "head": "demo-pointer", "identification_weight": 1.0}
+HEIGHTS = {**POINTER, "demo_heights": True}
 
 
 @pytest.mark.slow
@@ -29,7 +30,7 @@ def test_study_offline_measures_every_pair_per_task(
     tiny_copy: Path, tmp_path: Path, capsys
 ) -> None:
     recipe = tmp_path / "pointer.toml"
-    recipe.write_text(recipe_toml("tiny-pointer", POINTER))
+    recipe.write_text(recipe_toml("tiny-pointer", HEIGHTS))
     out = tmp_path / "ckpt"
     argv = ["train", "--method", "awda", "--data", str(tiny_copy), "--recipe", str(recipe)]
     assert main([*argv, "--steps", "2", "--no-progress", "--threads", "1", "--out", str(out)]) == 0
@@ -52,6 +53,8 @@ def test_study_offline_measures_every_pair_per_task(
     copy, shift = header.index("demo_copy_cm"), header.index("true_shift_cm")
     assert float(rows["all"][copy]) > 0.0 and float(rows["all"][shift]) > 0.0
     assert all(f"bias_{axis}_cm" in header for axis in "xyz")
+    height = header.index("hand_height_cm")  # demo_heights: the hand heights' error per task
+    assert all(float(row[height]) > 0.0 for name, row in rows.items() if name != "all")
     assert "wp_err_cm" in capsys.readouterr().out
     # only these tasks
     one = min(tasks)
@@ -97,7 +100,8 @@ def test_per_task_table_prints_each_tasks_axis_bias() -> None:
             "grasp_pred": False, "grasp_true": False, "grasp_err_cm": np.nan,
             "demo_copy_cm": 0.0, "true_shift_cm": 0.0, "demo_effect_cm": np.nan,
             "object_near": np.nan, "moved_near": np.nan, "target_near": float(task == 6),
-            "put_near": np.nan, "predicted": true + [0.0, 0.0, dz], "true": true,
+            "put_near": np.nan, "hand_height_cm": 3.0 + task, "predicted": true + [0.0, 0.0, dz],
+            "true": true,
         }  # fmt: skip
 
     table = per_task_table([row(6, 0.09), row(6, 0.07), row(7, -0.01)])
@@ -105,6 +109,7 @@ def test_per_task_table_prints_each_tasks_axis_bias() -> None:
     assert table.loc["t7", "bias_z_cm"] == pytest.approx(-1.0)
     assert table.loc["t6", "bias_x_cm"] == pytest.approx(0.0)
     assert table.loc["t6", "target_near"] == 1.0 and table.loc["t7", "target_near"] == 0.0
+    assert table.loc["t6", "hand_height_cm"] == 9.0 and table.loc["t7", "hand_height_cm"] == 10.0
 
 
 def test_the_pairs_index_their_cameras_among_the_snapshots() -> None:

@@ -36,6 +36,8 @@ trajectory (:func:`awda_bench.waypoints.extract_waypoints`), per task::
                      object on a task without one (:mod:`awda_bench.data.contact_point`)
     target_near      ``place_target`` snapshots: the same of the target softmax over o_1 (and the
     put_near         put softmax over the demo) against where the trajectory lets go
+    hand_height_cm   ``demo_heights`` snapshots: median over pairs of the mean distance between
+                     the hand height read off each demo frame and the demonstrator's TCP z there
 
 Frozen-trunk snapshots only (the features come from the collection's feature cache, built if
 missing).
@@ -58,6 +60,7 @@ from awda_bench.models.agent_cameras import config_cameras
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig
 from awda_bench.models.identification_loss import (
+    demo_frame_points,
     grasp_cells_per_camera,
     release_cells_per_camera,
 )
@@ -73,17 +76,27 @@ NEAR_COLUMNS = ("object_near", "moved_near", "target_near", "put_near")
 """The identification softmaxes' hit rates (module docstring); the place ones NaN without a place
 target."""
 
+POINTER_COLUMNS = (*NEAR_COLUMNS, "hand_height_cm")
+"""What :func:`_pointer_measures` gives per pair."""
 
-def _near_label(model: AwdaNet, batch: dict[str, torch.Tensor], n: int) -> dict[str, list[float]]:
+
+def _pointer_measures(
+    model: AwdaNet, batch: dict[str, torch.Tensor], n: int
+) -> dict[str, list[float]]:
     """Per pair, whether each of the pointer's identification softmaxes (:data:`NEAR_COLUMNS`)
-    peaks within one cell of its label (NaN without a label, a pointer, or a place target)."""
-    near = {key: [np.nan] * n for key in NEAR_COLUMNS}
+    peaks within one cell of its label (NaN without a label, a pointer, or a place target), and
+    its demo hand heights' error [cm] (NaN without ``demo_heights``)."""
+    near = {key: [np.nan] * n for key in POINTER_COLUMNS}
     pointer = getattr(model.scene_head, "pointer", None)
     if pointer is None:
         return near
     camera = model.camera_indices(batch.get("camera"), n)
     demo, first = model.cached_maps(batch["demo_features"], batch["first_frame_features"])
     out = pointer(demo, first, torch.zeros_like(batch["head"]), camera)
+    if out.demo_heights is not None:
+        frames = out.demo_heights.shape[1]
+        truth = demo_frame_points(batch["demo_trajectory"], frames)[..., 2]
+        near["hand_height_cm"] = ((out.demo_heights - truth).abs().mean(1) * 100).tolist()
     width = model.grid[1]
     cameras, grid = model.ray_cameras, model.grid
     labels = [
@@ -202,7 +215,7 @@ def pair_rows(
             swapped = _largest_set(
                 model, batch["demo_features"][np.maximum(partners, 0)], batch, len(chunk)
             )
-            near = _near_label(model, batch, len(chunk))
+            near = _pointer_measures(model, batch, len(chunk))
             for n, (i, predicted) in enumerate(zip(chunk, largest, strict=True)):
                 agent, demo, _head = pairs.pairs[i]
                 grasp, tcp, true = truth(agent)
@@ -227,7 +240,7 @@ def pair_rows(
                     "demo_copy_cm": _mean_distance_cm(predicted[:, :3], demo_true),
                     "true_shift_cm": _mean_distance_cm(true, demo_true),
                     "demo_effect_cm": demo_effect,
-                    **{key: near[key][n] for key in NEAR_COLUMNS},
+                    **{key: near[key][n] for key in POINTER_COLUMNS},
                     "predicted": predicted[:, :3],
                     "true": true,
                 })  # fmt: skip
@@ -271,6 +284,7 @@ def per_task_table(rows: list[dict[str, Any]]) -> pd.DataFrame:
             "demo_effect_cm": frame["demo_effect_cm"].median(),
             **dict(zip(("bias_x_cm", "bias_y_cm", "bias_z_cm"), axis_bias_cm(group), strict=True)),
             **{key: frame[key].mean() for key in NEAR_COLUMNS},
+            "hand_height_cm": frame["hand_height_cm"].median(),
         })  # fmt: skip
     every = pd.DataFrame(rows)
     table.append({
