@@ -10,7 +10,7 @@ import torch.nn.functional as F
 
 from awda_bench.errors import UsageError
 from awda_bench.models.awda_net import AwdaNet
-from awda_bench.models.cell_readout import CellHeadShape, HandPath
+from awda_bench.models.cell_readout import CellHeadShape, DemoHeights, HandPath
 from awda_bench.models.config import AwdaConfig, TrunkConfig
 from awda_bench.models.demo_pointer import DemoPointer
 from awda_bench.models.identification_loss import (
@@ -421,8 +421,9 @@ def test_the_place_targets_cosine_finds_a_kind_of_target_never_trained_on() -> N
 
 def test_demo_heights_carry_the_demos_hand_height_into_every_waypoint() -> None:
     """With ``demo_heights`` a waypoint's height follows the demo's hand heights: raising every
-    demo frame's height by 7 cm raises every waypoint by 7 cm (the cells' own votes unchanged),
-    and a readout built with them refuses to run without."""
+    demo frame's height by 7 cm raises every waypoint by 7 cm (the cells' own votes unchanged);
+    a waypoint picks its frame by what the frame shows, wherever it stands in the demo; and a
+    readout built with them refuses to run without."""
     torch.manual_seed(0)
     grid = (6, 8)
     camera = (torch.tensor(K), torch.tensor(E), (240, 320))
@@ -435,12 +436,29 @@ def test_demo_heights_carry_the_demos_hand_height_into_every_waypoint() -> None:
         readout.height_phase.normal_()  # each waypoint its own blend of the frames
     x, head = torch.randn(2, 48, 16), torch.tensor([0, 1])
     prior = torch.zeros(2, 48)
+    frames = torch.randn(2, 4, 16)
     heights = 0.1 * torch.rand(2, 4)
     with torch.no_grad():
-        low = readout(x, head, prior=prior, heights=heights)
-        high = readout(x, head, prior=prior, heights=heights + 0.07)
+        low = readout(x, head, prior=prior, heights=DemoHeights(heights, frames))
+        high = readout(x, head, prior=prior, heights=DemoHeights(heights + 0.07, frames))
     assert torch.allclose(high[..., 2] - low[..., 2], torch.full((2, 5), 0.07), atol=1e-5)
     assert not torch.allclose(high[..., :2], low[..., :2])  # each point moved along its ray
+    # every waypoint looks for the frame that shows feature 0: frame 1 in one demo, 3 in another
+    with torch.no_grad():
+        readout.height_phase.zero_()
+        for when in readout.height_when:
+            when.weight.zero_()
+            when.bias.zero_()
+            when.weight[:, 0] = 50.0
+    marked = torch.zeros(2, 4, 16)
+    marked[0, 1, 0] = marked[1, 3, 0] = 1.0
+    zeta = torch.tensor([[0.02, 0.30, 0.05, 0.10], [0.02, 0.30, 0.05, 0.10]])
+    head = torch.zeros(2, dtype=torch.long)
+    with torch.no_grad():
+        out = readout(x[:1].expand(2, -1, -1), head, prior=prior, heights=DemoHeights(zeta, marked))
+    torch.testing.assert_close(
+        out[0, :, 2] - out[1, :, 2], torch.full((5,), 0.20), atol=1e-4, rtol=0
+    )
     with pytest.raises(ValueError, match="demo_heights"):
         readout(x, head, prior=prior)
 

@@ -23,10 +23,17 @@ With a demo hand path (``hand_path``: the demo's hand positions relative to the 
     v_j(cell) = MLP_j([x(cell), cell x, y, r_1 .. r_Td])
 
 With demo heights (``demo_heights``: the demonstrator's hand height read off each demo frame,
-``zeta`` ``(Td,)`` [m], :mod:`awda_bench.models.demo_pointer`), a waypoint's height is no longer one
-number shared by every task::
+``zeta`` ``(Td,)`` [m], and what the frame shows where the hand is, ``f_t`` ``(Td, d)``:
+:class:`DemoHeights`, from :mod:`awda_bench.models.demo_pointer`), a waypoint's height is no
+longer one number shared by every task::
 
-    z_j = z_j0 + sum_t softmax(phase_j)_t zeta_t      (z_j0, phase_j learned per head and waypoint)
+    when_j(t) = phase_j(t) + u_j . [f_t, zeta_t]       which demo frame waypoint j's height is
+    z_j = z_j0 + sum_t softmax_t(when_j) zeta_t        (z_j0, phase_j, u_j learned per head and
+                                                        waypoint)
+
+``u_j`` lets a waypoint pick its frame by what it shows (the grasp, the hand over a wall), not by
+its time alone: a fixed phase put pick-place-wall's carry at its grasp's height
+(recipe-study-metaworld.md, V14).
 
 The rays make the choice learnable: from the first step, moving p_j towards the cells that image a
 point moves the waypoint towards that point (free xyz votes start equal, and the loss then only
@@ -72,6 +79,15 @@ def cell_rays(
     directions = pixels @ torch.linalg.inv(intrinsic).T @ rotation  # R^T K^-1 [u v 1]
     directions = directions / directions.norm(dim=-1, keepdim=True)
     return -rotation.T @ translation, directions
+
+
+class DemoHeights(NamedTuple):
+    """The demonstrator's hand in each demo frame, for waypoint heights (module docstring)."""
+
+    heights: torch.Tensor
+    """``(B, Td)``: its height [m]."""
+    frames: torch.Tensor
+    """``(B, Td, d)``: what each frame shows where the hand is."""
 
 
 class HandPath(NamedTuple):
@@ -154,6 +170,9 @@ class CellReadout(nn.Module):
             if not cameras:
                 raise ValueError("demo heights need ray votes (cameras)")
             self.height_phase = nn.Parameter(torch.zeros(num_heads, waypoints, shape.demo_frames))
+            self.height_when = nn.ModuleList(
+                nn.Linear(dim + 1, waypoints) for _ in range(num_heads)
+            )
         self.where_logits = nn.ModuleList(nn.Linear(dim, waypoints) for _ in range(num_heads))
         self.prior_weight = nn.Parameter(torch.zeros(num_heads, waypoints)) if prior else None
         self.place_target = prior and shape.place_target
@@ -192,18 +211,21 @@ class CellReadout(nn.Module):
         votes: torch.Tensor,
         head: int,
         camera: torch.Tensor,
-        heights: torch.Tensor | None = None,
+        heights: DemoHeights | None = None,
     ) -> torch.Tensor:
         """Raw votes ``(b, L, N, 3 + k)`` read as (z, dx, dy, attributes) on the rays of each
         sample's ``camera`` ``(b,)`` -> attributed points: a waypoint's height is its own
-        parameter (plus, with ``heights`` ``(b, Td)``, its blend of the demo's hand heights) plus
+        parameter (plus, with ``heights``, its choice of the demo's hand heights) plus
         at most ``height_offset_m`` from the cell (and the point at most ``offset_m`` off its ray
         horizontally), so that votes start ordered along the image (a free height per cell would
         scatter them)."""
         height = self.height[head].view(1, 1, -1, 1)  # (1, 1, N, 1)
         if heights is not None:
-            phase = torch.softmax(self.height_phase[head], dim=-1)  # (N, Td)
-            height = height + (heights @ phase.T)[:, None, :, None]  # (b, 1, N, 1)
+            zeta = heights.heights  # (b, Td)
+            read = torch.cat((heights.frames, zeta[..., None]), dim=-1)  # (b, Td, d + 1)
+            when = self.height_phase[head] + self.height_when[head](read).transpose(1, 2)
+            chosen = torch.einsum("bnt,bt->bn", torch.softmax(when, dim=-1), zeta)
+            height = height + chosen[:, None, :, None]  # (b, 1, N, 1)
         z = height + self.height_offset_m * torch.tanh(votes[..., :1])
         offset, attributes = votes[..., 1:3], votes[..., 3:]
         direction = self.ray_direction[camera][:, :, None, :]  # (b, L, 1, 3)
@@ -255,11 +277,11 @@ class CellReadout(nn.Module):
         prior: torch.Tensor | None = None,
         camera: torch.Tensor | None = None,
         path: HandPath | None = None,
-        heights: torch.Tensor | None = None,
+        heights: DemoHeights | None = None,
     ) -> torch.Tensor:
         """``camera`` ``(B,)``: each sample's camera index (``None``: all the first);
-        ``heights`` ``(B, Td)``: the demo's hand heights (a readout built with ``demo_heights``
-        takes them, and only such a one)."""
+        ``heights``: the demo's hand heights (a readout built with ``demo_heights`` takes them,
+        and only such a one)."""
         if (heights is None) == self.demo_heights:
             raise ValueError(
                 "a readout built with demo_heights=True takes heights, and only such a one"
@@ -285,7 +307,10 @@ class CellReadout(nn.Module):
             votes = self.vote[i](values_in[rows]).view(-1, cells, self.waypoints, self.waypoint_dim)
             if self.rays:
                 votes = self._ray_points(
-                    votes, i, camera[rows], None if heights is None else heights[rows]
+                    votes,
+                    i,
+                    camera[rows],
+                    None if heights is None else DemoHeights(*(t[rows] for t in heights)),
                 )
             out[rows] = torch.einsum("bln,blnk->bnk", where, votes)
         return out

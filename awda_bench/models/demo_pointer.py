@@ -70,7 +70,8 @@ With ``demo_heights`` (a deviation; ``AwdaConfig.demo_heights``)::
     height:   zeta_t = MLP([sum softmax(k_t) e(demo_t), mean e(demo_t), E_softmax(k_t)[cell xy]])
               the demonstrator's hand height [m] in demo frame t, read where its hand is
               (supervised: its TCP's z)
-    the readout sets each waypoint's height from a learned blend of the zeta_t
+    the readout sets each waypoint's height from the zeta_t of the frame it picks by what the
+    hand's cells show there and when
     (:mod:`awda_bench.models.cell_readout`) instead of one number per waypoint: on Meta-World a
     task's objects keep their heights across layouts, so the demonstrator's heights are the
     agent's, and a held-out task's (a button 10 cm below its training sibling's) are in its demo.
@@ -90,7 +91,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from awda_bench.models.cell_readout import CellHeadShape, CellReadout, HandPath
+from awda_bench.models.cell_readout import CellHeadShape, CellReadout, DemoHeights, HandPath
 
 
 def _mlp(inputs: int, hidden: int, outputs: int, dropout: float) -> nn.Sequential:
@@ -273,9 +274,10 @@ class DemoPointer(nn.Module):
         anchor = torch.softmax(found, dim=-1) @ xy
         return HandPath(hand - start[:, None], anchor)
 
-    def hand_heights(self, demo_cells: torch.Tensor, hand_logits: torch.Tensor) -> torch.Tensor:
+    def hand_heights(self, demo_cells: torch.Tensor, hand_logits: torch.Tensor) -> DemoHeights:
         """Embedded demo frames ``(B, Td, d, h, w)`` and their hand logits -> the
-        demonstrator's hand height [m] in each, ``(B, Td)`` (module docstring)."""
+        demonstrator's hand height [m] in each and what the frame shows where the hand is
+        (module docstring)."""
         if self.height_value is None:
             raise ValueError("this head was built without demo heights (CellHeadShape)")
         b, t, d, h, w = demo_cells.shape
@@ -284,7 +286,7 @@ class DemoPointer(nn.Module):
         seen = torch.einsum("nl,ndl->nd", look, flat)
         where = look @ self.readout.cell_xy  # (B*Td, 2)
         value = self.height_value(torch.cat((seen, flat.mean(-1), where), dim=-1))
-        return value.view(b, t)
+        return DemoHeights(value.view(b, t), seen.view(b, t, d))
 
     def pointer(
         self,
@@ -304,7 +306,8 @@ class DemoPointer(nn.Module):
             if self.height_value is not None:
                 heights = self.hand_heights(demo_cells, hand)
         waypoints = self.readout(x, head, prior=prior, camera=camera, path=path, heights=heights)
-        return PointerOutput(waypoints, moved, found, hand, put, target, heights)
+        zeta = None if heights is None else heights.heights
+        return PointerOutput(waypoints, moved, found, hand, put, target, zeta)
 
     def forward(
         self,
