@@ -137,8 +137,9 @@ class CellHeadShape:
     """``place_target``: the target logits are a learned multiple of the cosine between each o_1
     cell's and the demo's target appearance."""
     demo_heights: bool = False
-    """The readout takes the demonstrator's hand height per demo frame, and each waypoint's
-    height follows a learned blend of them (module docstring; needs ``cameras``)."""
+    """The readout takes the demonstrator's hand height per demo frame (:class:`DemoHeights`),
+    and each waypoint's height follows the frame it picks (module docstring; needs
+    ``cameras``)."""
 
 
 class CellReadout(nn.Module):

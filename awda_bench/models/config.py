@@ -229,9 +229,10 @@ class AwdaConfig:
     a kind no training family puts things on)."""
     demo_heights: bool = False
     """``demo-pointer`` head: each waypoint's height follows the demonstrator's hand heights,
-    read off the demo's frames (a learned look per frame and a regression, supervised like the
-    identification loss by the demo's own TCP z), through a learned blend per waypoint, instead of
-    one height parameter per waypoint shared by every task (plus each cell's vote, within
+    read off the demo's frames where its hand is (the hand softmax per frame, supervised as
+    ``demo_hand_path``'s, and a regression supervised by the demo's own TCP z): each waypoint
+    takes the height of the demo frame it picks by a learned score over what that frame shows,
+    instead of one height parameter per waypoint shared by every task (plus each cell's vote, within
     ``ray_height_offset_m``). Meta-World's held-out pushes: at one height per waypoint the
     button-press and door-unlock waypoints sit 5-8 cm above their contact, at their training
     siblings' heights (recipe-study-metaworld.md, V14). Needs ``identification_weight > 0`` (the

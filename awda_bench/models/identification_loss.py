@@ -152,15 +152,21 @@ HEIGHT_SCALE_M = 0.05
 linear beyond), so that it weighs as the cross-entropies beside it do."""
 
 
+def height_errors_m(heights: torch.Tensor, demo_trajectory: torch.Tensor) -> torch.Tensor:
+    """``(B, Td)``: the demo-pointer's hand heights [m] minus the demonstrator's TCP z in each
+    demo frame (:func:`demo_frame_points`)."""
+    return heights - demo_frame_points(demo_trajectory, heights.shape[1])[..., 2]
+
+
 def height_loss(
     heights: torch.Tensor, demo_trajectory: torch.Tensor
 ) -> tuple[torch.Tensor, dict[str, float]]:
     """Huber loss of the demo-pointer's hand heights ``(B, Td)`` [m] against the demonstrator's
-    TCP z in each demo frame (:func:`demo_frame_points`), in units of :data:`HEIGHT_SCALE_M`;
-    also reports the mean absolute error [cm]."""
-    truth = demo_frame_points(demo_trajectory, heights.shape[1])[..., 2]
-    loss = F.smooth_l1_loss(heights / HEIGHT_SCALE_M, truth / HEIGHT_SCALE_M)
-    error_cm = float((heights - truth).abs().mean().detach()) * 100.0
+    TCP z in each demo frame, in units of :data:`HEIGHT_SCALE_M`; also reports the mean absolute
+    error [cm]."""
+    error = height_errors_m(heights, demo_trajectory) / HEIGHT_SCALE_M
+    loss = F.smooth_l1_loss(error, torch.zeros_like(error))
+    error_cm = float(error.abs().mean().detach()) * HEIGHT_SCALE_M * 100.0
     return loss, {"id_height": float(loss.detach()), "id_height_err_cm": error_cm}
 
 

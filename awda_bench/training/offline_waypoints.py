@@ -60,8 +60,8 @@ from awda_bench.models.agent_cameras import config_cameras
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig
 from awda_bench.models.identification_loss import (
-    demo_frame_points,
     grasp_cells_per_camera,
+    height_errors_m,
     release_cells_per_camera,
 )
 from awda_bench.models.snapshot import load_snapshot
@@ -94,9 +94,8 @@ def _pointer_measures(
     demo, first = model.cached_maps(batch["demo_features"], batch["first_frame_features"])
     out = pointer(demo, first, torch.zeros_like(batch["head"]), camera)
     if out.demo_heights is not None:
-        frames = out.demo_heights.shape[1]
-        truth = demo_frame_points(batch["demo_trajectory"], frames)[..., 2]
-        near["hand_height_cm"] = ((out.demo_heights - truth).abs().mean(1) * 100).tolist()
+        error = height_errors_m(out.demo_heights, batch["demo_trajectory"])
+        near["hand_height_cm"] = (error.abs().mean(1) * 100).tolist()
     width = model.grid[1]
     cameras, grid = model.ray_cameras, model.grid
     labels = [
