@@ -463,6 +463,33 @@ def test_demo_heights_carry_the_demos_hand_height_into_every_waypoint() -> None:
         readout(x, head, prior=prior)
 
 
+@pytest.mark.parametrize(("unit_m", "taken_m"), [(0.05, 0.02), (1.0, 0.08)])
+def test_demo_heights_choice_reads_heights_in_its_unit(unit_m: float, taken_m: float) -> None:
+    """By height alone, a modest weight (-4 per unit) makes every waypoint take the demo's lowest
+    frame, 3 cm below the next, when the choice reads heights in 5-cm units; in metres (the unit
+    before session 44) the same weight blends all four frames (0.08 m)."""
+    torch.manual_seed(0)
+    camera = (torch.tensor(K), torch.tensor(E), (240, 320))
+    shape = CellHeadShape(
+        channels=8, grid=(6, 8), demo_frames=4, dim=16, dropout=0.0, hidden=32, waypoints=5,
+        waypoint_dim=4, num_heads=1, cameras=(camera,), demo_heights=True, height_unit_m=unit_m,
+    )  # fmt: skip
+    readout = DemoPointer(shape).readout.eval()
+    cells, head = torch.randn(1, 48, 16).expand(2, -1, -1), torch.zeros(2).long()
+    prior, blank = torch.zeros(2, 48), torch.zeros(2, 4, 16)
+    deep = torch.tensor([[0.30, 0.02, 0.05, 0.10], [0.30, 0.05, 0.02, 0.10]])
+    with torch.no_grad():
+        readout.height_phase.zero_()
+        readout.height_when[0].weight.zero_()
+        readout.height_when[0].bias.zero_()
+        readout.height_when[0].weight[:, -1] = -4.0
+        taken = readout(cells, head, prior=prior, heights=DemoHeights(deep, blank))
+        floor = readout(cells, head, prior=prior, heights=DemoHeights(torch.zeros(2, 4), blank))
+    torch.testing.assert_close(
+        taken[..., 2] - floor[..., 2], torch.full((2, 5), taken_m), atol=5e-3, rtol=0
+    )
+
+
 def test_demo_heights_train_with_the_identification_loss() -> None:
     """The height loss labels the hand height read off each demo frame (where the hand loss says
     the hand is) with the demonstrator's TCP z there; its gradient reaches the hand, the height

@@ -85,6 +85,7 @@ class AwdaNet(nn.Module):
                 offset_m=config.ray_offset_m,
                 hand_path=config.demo_hand_path,
                 demo_heights=config.demo_heights,
+                height_unit_m=config.demo_height_unit_m,
                 place_target=config.place_target,
                 place_pool=config.place_target_pool,
                 place_match=config.place_target_match,

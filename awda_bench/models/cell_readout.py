@@ -27,9 +27,9 @@ With demo heights (``demo_heights``: the demonstrator's hand height read off eac
 :class:`DemoHeights`, from :mod:`awda_bench.models.demo_pointer`), a waypoint's height is no
 longer one number shared by every task::
 
-    when_j(t) = phase_j(t) + u_j . [f_t, zeta_t]       which demo frame waypoint j's height is
+    when_j(t) = phase_j(t) + u_j . [f_t, zeta_t / unit]  which demo frame waypoint j's height is
     z_j = z_j0 + sum_t softmax_t(when_j) zeta_t        (z_j0, phase_j, u_j learned per head and
-                                                        waypoint)
+                                                        waypoint; ``height_unit_m``: 1 m or 5 cm)
 
 ``u_j`` lets a waypoint pick its frame by what it shows (the grasp, the hand over a wall), not by
 its time alone: a fixed phase put pick-place-wall's carry at its grasp's height
@@ -140,6 +140,9 @@ class CellHeadShape:
     """The readout takes the demonstrator's hand height per demo frame (:class:`DemoHeights`),
     and each waypoint's height follows the frame it picks (module docstring; needs
     ``cameras``)."""
+    height_unit_m: float = 1.0
+    """``demo_heights``: the unit [m] in which the choice of frame reads the heights
+    (``AwdaConfig.demo_height_unit_m``)."""
 
 
 class CellReadout(nn.Module):
@@ -166,7 +169,7 @@ class CellReadout(nn.Module):
             self.register_buffer("ray_origin", torch.stack([o for o, _ in rays]).float())
             self.register_buffer("ray_direction", torch.stack([d for _, d in rays]).float())
             self.height = nn.Parameter(torch.full((num_heads, waypoints), INITIAL_HEIGHT_M))
-        self.demo_heights = shape.demo_heights
+        self.demo_heights, self.height_unit_m = shape.demo_heights, shape.height_unit_m
         if shape.demo_heights:
             if not cameras:
                 raise ValueError("demo heights need ray votes (cameras)")
@@ -223,7 +226,8 @@ class CellReadout(nn.Module):
         height = self.height[head].view(1, 1, -1, 1)  # (1, 1, N, 1)
         if heights is not None:
             zeta = heights.heights  # (b, Td)
-            read = torch.cat((heights.frames, zeta[..., None]), dim=-1)  # (b, Td, d + 1)
+            unit = zeta[..., None] / self.height_unit_m
+            read = torch.cat((heights.frames, unit), dim=-1)  # (b, Td, d + 1)
             when = self.height_phase[head] + self.height_when[head](read).transpose(1, 2)
             chosen = torch.einsum("bnt,bt->bn", torch.softmax(when, dim=-1), zeta)
             height = height + chosen[:, None, :, None]  # (b, 1, N, 1)

@@ -237,6 +237,14 @@ class AwdaConfig:
     button-press and door-unlock waypoints sit 5-8 cm above their contact, at their training
     siblings' heights (recipe-study-metaworld.md, V14). Needs ``identification_weight > 0`` (the
     height loss shares its weight). A deviation: the reference has no such loss."""
+    demo_height_unit_m: float = 1.0
+    """``demo_heights``: the unit [m] in which a waypoint's choice of demo frame reads each
+    frame's height. 1.0 (metres; every ``demo_heights`` snapshot before session 44): a 20-cm
+    difference between two frames moves the choice's logits by a fifth of the height's weight,
+    and after 24,000 steps on Meta-World every waypoint still spread its choice over the whole
+    demo (its height the demo's mean, the weights at their initial size). 0.05: the same weight
+    moves them by 4, so a waypoint can learn to take the demo's lowest or highest frame
+    (recipe-study-metaworld.md, V16)."""
     ray_offset_m: float = 0.05
     """Cell heads voting on camera rays: how far [m] a cell's vote may move horizontally off its
     ray (``cell_readout``). 0.05: a waypoint is where the cells it points at are. Larger lets a
@@ -329,6 +337,13 @@ class AwdaConfig:
             "demo_heights",
             self.demo_heights,
             "false, or true with identification_weight > 0 (head 'demo-pointer', a camera)",
+        )
+        check_field(
+            self.demo_height_unit_m > 0.0,
+            o,
+            "demo_height_unit_m",
+            self.demo_height_unit_m,
+            "a positive length in metres (1.0, or 0.05 for 5-cm units)",
         )
         check_field(
             not self.place_target or self.identification_weight > 0.0,
@@ -446,6 +461,7 @@ AWDA_TABLE_FIELDS: tuple[str, ...] = (
     "ray_offset_m",
     "demo_hand_path",
     "demo_heights",
+    "demo_height_unit_m",
     "place_target",
     "place_target_pool",
     "place_target_match",
