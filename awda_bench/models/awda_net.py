@@ -39,6 +39,7 @@ from awda_bench.models.config import CELL_HEADS, AwdaConfig
 from awda_bench.models.demo_pointer import DemoPointer, PointerOutput
 from awda_bench.models.demo_to_scene import DemoToScene
 from awda_bench.models.frame_encoder import feature_map_size
+from awda_bench.models.frame_time_loss import frame_time_loss
 from awda_bench.models.identification_loss import (
     hand_loss,
     height_loss,
@@ -257,6 +258,18 @@ class AwdaNet(nn.Module):
                     )
                     loss = loss + cfg.identification_weight * height
                     info.update(height_info)
+                if pointed.frame_logits is not None and cfg.demo_frame_time_weight > 0.0:
+                    when, when_info = frame_time_loss(
+                        pointed.frame_logits,
+                        waypoints,
+                        batch["trajectory"],
+                        num_sets=cfg.num_waypoint_sets,
+                        points_per_segment=cfg.points_per_segment,
+                        gamma=cfg.gamma,
+                        attribute_scale=cfg.attribute_scale,
+                    )
+                    loss = loss + cfg.demo_frame_time_weight * when
+                    info.update(when_info)
                 if pointed.put_logits is not None and pointed.target_logits is not None:
                     place, place_info = place_loss(
                         pointed.put_logits,

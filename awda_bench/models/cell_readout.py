@@ -210,6 +210,28 @@ class CellReadout(nn.Module):
                 state_dict[key] = state_dict[key].unsqueeze(0)
         super()._load_from_state_dict(state_dict, prefix, *args)
 
+    def _frame_logits(self, heights: DemoHeights, head: int) -> torch.Tensor:
+        """``when_j(t)`` of samples of waypoint head ``head``: ``(b, N, Td)`` logits of which demo
+        frame's height each waypoint takes (module docstring)."""
+        unit = heights.heights[..., None] / self.height_unit_m
+        read = torch.cat((heights.frames, unit), dim=-1)  # (b, Td, d + 1)
+        return self.height_phase[head] + self.height_when[head](read).transpose(1, 2)
+
+    def frame_logits(self, heights: DemoHeights, head: torch.Tensor) -> torch.Tensor:
+        """The choice of demo frame for every sample (each through its own head ``(B,)``):
+        ``(B, N, Td)`` logits, the softmax of which blends the demo's heights into each
+        waypoint's (what :meth:`forward` uses; exposed for the frame-time loss,
+        :mod:`awda_bench.models.frame_time_loss`)."""
+        if not self.demo_heights:
+            raise ValueError("only a readout built with demo_heights=True chooses demo frames")
+        b, frames = heights.heights.shape
+        out = heights.frames.new_empty(b, self.waypoints, frames)
+        for i in range(self.num_heads):
+            rows = head == i
+            if bool(rows.any()):
+                out[rows] = self._frame_logits(DemoHeights(*(t[rows] for t in heights)), i)
+        return out
+
     def _ray_points(
         self,
         votes: torch.Tensor,
@@ -225,11 +247,8 @@ class CellReadout(nn.Module):
         scatter them)."""
         height = self.height[head].view(1, 1, -1, 1)  # (1, 1, N, 1)
         if heights is not None:
-            zeta = heights.heights  # (b, Td)
-            unit = zeta[..., None] / self.height_unit_m
-            read = torch.cat((heights.frames, unit), dim=-1)  # (b, Td, d + 1)
-            when = self.height_phase[head] + self.height_when[head](read).transpose(1, 2)
-            chosen = torch.einsum("bnt,bt->bn", torch.softmax(when, dim=-1), zeta)
+            when = self._frame_logits(heights, head)
+            chosen = torch.einsum("bnt,bt->bn", torch.softmax(when, dim=-1), heights.heights)
             height = height + chosen[:, None, :, None]  # (b, 1, N, 1)
         z = height + self.height_offset_m * torch.tanh(votes[..., :1])
         offset, attributes = votes[..., 1:3], votes[..., 3:]

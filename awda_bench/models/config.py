@@ -245,6 +245,13 @@ class AwdaConfig:
     demo (its height the demo's mean, the weights at their initial size). 0.05: the same weight
     moves them by 4, so a waypoint can learn to take the demo's lowest or highest frame
     (recipe-study-metaworld.md, V16)."""
+    demo_frame_time_weight: float = 0.0
+    """``demo_heights``: weight of the frame-time loss (:mod:`awda_bench.models.frame_time_loss`),
+    a cross-entropy that teaches each waypoint's choice of demo frame the frame at the fraction of
+    the episode at which Soft-DTW matches that waypoint to the agent's trajectory. 0 (every
+    ``demo_heights`` snapshot before session 45): the choice learns from the Soft-DTW loss alone,
+    and on Meta-World it stayed spread over the whole demo (recipe-study-metaworld.md, V17). A
+    deviation: the reference has no such loss."""
     ray_offset_m: float = 0.05
     """Cell heads voting on camera rays: how far [m] a cell's vote may move horizontally off its
     ray (``cell_readout``). 0.05: a waypoint is where the cells it points at are. Larger lets a
@@ -337,6 +344,14 @@ class AwdaConfig:
             "demo_heights",
             self.demo_heights,
             "false, or true with identification_weight > 0 (head 'demo-pointer', a camera)",
+        )
+        check_field(
+            self.demo_frame_time_weight == 0.0
+            or (self.demo_heights and self.demo_frame_time_weight > 0.0),
+            o,
+            "demo_frame_time_weight",
+            self.demo_frame_time_weight,
+            "0, or a positive weight with demo_heights = true",
         )
         check_field(
             self.demo_height_unit_m > 0.0,
@@ -462,6 +477,7 @@ AWDA_TABLE_FIELDS: tuple[str, ...] = (
     "demo_hand_path",
     "demo_heights",
     "demo_height_unit_m",
+    "demo_frame_time_weight",
     "place_target",
     "place_target_pool",
     "place_target_match",

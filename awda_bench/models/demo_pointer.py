@@ -175,6 +175,9 @@ class PointerOutput(NamedTuple):
     demo_heights: torch.Tensor | None = None
     """``(B, Td)``: the demonstrator's hand height [m] read off each demo frame
     (``demo_heights`` heads)."""
+    frame_logits: torch.Tensor | None = None
+    """``(B, N, Td)``: which demo frame's height each waypoint takes, logits (``demo_heights``
+    heads)."""
 
 
 class DemoPointer(nn.Module):
@@ -306,8 +309,10 @@ class DemoPointer(nn.Module):
             if self.height_value is not None:
                 heights = self.hand_heights(demo_cells, hand)
         waypoints = self.readout(x, head, prior=prior, camera=camera, path=path, heights=heights)
-        zeta = None if heights is None else heights.heights
-        return PointerOutput(waypoints, moved, found, hand, put, target, zeta)
+        zeta = choice = None
+        if heights is not None:
+            zeta, choice = heights.heights, self.readout.frame_logits(heights, head)
+        return PointerOutput(waypoints, moved, found, hand, put, target, zeta, choice)
 
     def forward(
         self,

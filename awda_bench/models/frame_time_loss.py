@@ -1,0 +1,112 @@
+r"""The frame-time loss: each waypoint's choice of demo frame supervised by *when* its path
+reaches it (``[model] demo_frame_time_weight``; a deviation: the reference has no such loss).
+
+With demo heights (:mod:`awda_bench.models.cell_readout`) a waypoint takes the height of the demo
+frame it chooses, but nothing in the Soft-DTW loss says which frame that should be: the loss matches
+a path to the trajectory, not a waypoint to a moment, and on Meta-World the choice stayed spread
+over the whole demo after 24,000 steps while each cell's vote took the height
+(reports/learned/recipe-study-metaworld.md, session 44). This loss names the moment::
+
+    E_s = dR_s / dDelta_s        Soft-DTW's expected alignment of set s's polyline with the
+                                 agent's trajectory (T points, uniform in time over its episode)
+    tau_j = argmin { Delta_s[n_j, t] : E_s[n_j, t] >= max_t E_s[n_j, t] / 2 } / (T - 1)
+                                 the fraction of the episode at which the path reaches waypoint j:
+                                 of the trajectory points aligned with its node n_j of the
+                                 polyline (n_j = (i + 1) P for the set's i-th waypoint), the
+                                 nearest (a set's last node is aligned with every point after
+                                 the one it stands for, a pause with a run of points)
+    q_j(k) = max(0, 1 - |tau_j (Td - 1) - k|)
+                                 the demo frames at the same fraction of the demo (its Td frames
+                                 sit at round(linspace(0, T_d, Td))), linearly interpolated
+    loss = mean_j  - sum_k q_j(k) log softmax_k(when_j)
+
+The alignment is read off the prediction (detached) and the trajectory, so the target moves with
+the path: a waypoint the loss matches to the lift takes the demo's frame of the lift, and with it
+the demonstrator's height there. Demo and agent are episodes of one task, scripted to the same
+phases, so equal fractions of their episodes are the same moment of the task.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+
+from awda_bench.errors import UsageError
+from awda_bench.models.soft_dtw import soft_dtw_from_cost, squared_euclidean_cost
+from awda_bench.models.waypoint_loss import (
+    interpolate_polyline,
+    split_waypoint_sets,
+    to_cost_space,
+)
+
+
+def waypoint_times(
+    waypoints: torch.Tensor,
+    trajectory: torch.Tensor,
+    *,
+    num_sets: int,
+    points_per_segment: int,
+    gamma: float,
+    attribute_scale: float,
+) -> torch.Tensor:
+    """``tau`` ``(B, S(S+1)/2)`` in [0, 1]: the fraction of the agent's episode at which the
+    Soft-DTW alignment matches each waypoint (module docstring; no gradient). Arguments as
+    :func:`awda_bench.models.waypoint_loss.multi_waypoint_sdtw_loss`'s."""
+    target = to_cost_space(trajectory.detach().float(), attribute_scale, logits=False)
+    predicted = to_cost_space(waypoints.detach().float(), attribute_scale, logits=True)
+    start = target[:, 0]
+    times = []
+    with torch.enable_grad():
+        for wp in split_waypoint_sets(predicted, num_sets):
+            line = interpolate_polyline(start, wp, points_per_segment)
+            cost = squared_euclidean_cost(line, target).requires_grad_(True)
+            (alignment,) = torch.autograd.grad(soft_dtw_from_cost(cost, gamma).sum(), cost)
+            nodes = alignment[:, points_per_segment::points_per_segment]  # (B, j, T)
+            aligned = nodes >= 0.5 * nodes.amax(-1, keepdim=True)
+            near = cost.detach()[:, points_per_segment::points_per_segment]
+            times.append(near.masked_fill(~aligned, float("inf")).argmin(-1))
+    return torch.cat(times, dim=1).to(target.dtype) / max(target.shape[1] - 1, 1)
+
+
+def frame_targets(times: torch.Tensor, frames: int) -> torch.Tensor:
+    """``(B, W)`` fractions in [0, 1] -> ``(B, W, frames)``: weights on the demo frames at the
+    same fraction of the demo, linearly interpolated between the two nearest (sum 1)."""
+    position = times.clamp(0.0, 1.0)[..., None] * (frames - 1)
+    k = torch.arange(frames, dtype=times.dtype, device=times.device)
+    return (1.0 - (position - k).abs()).clamp_min(0.0)
+
+
+def frame_time_loss(
+    frame_logits: torch.Tensor,
+    waypoints: torch.Tensor,
+    trajectory: torch.Tensor,
+    *,
+    num_sets: int,
+    points_per_segment: int,
+    gamma: float,
+    attribute_scale: float,
+) -> tuple[torch.Tensor, dict[str, float]]:
+    """Cross-entropy of the choice of demo frame ``frame_logits (B, W, Td)`` against the frames
+    at each waypoint's matched time (module docstring), and what it reports: the loss and the
+    mean |chosen - matched| fraction of the episode (``frame_time_gap``)."""
+    if frame_logits.dim() != 3 or frame_logits.shape[:2] != waypoints.shape[:2]:
+        raise UsageError(
+            f"frame logits (B, W, Td) must match waypoints (B, W, D): "
+            f"{tuple(frame_logits.shape)} vs {tuple(waypoints.shape)}"
+        )
+    times = waypoint_times(
+        waypoints,
+        trajectory,
+        num_sets=num_sets,
+        points_per_segment=points_per_segment,
+        gamma=gamma,
+        attribute_scale=attribute_scale,
+    )
+    frames = frame_logits.shape[-1]
+    target = frame_targets(times, frames)
+    log_choice = F.log_softmax(frame_logits.float(), dim=-1)
+    loss = -(target * log_choice).sum(-1).mean()
+    k = torch.arange(frames, dtype=times.dtype, device=times.device) / max(frames - 1, 1)
+    chosen = (log_choice.detach().exp() * k).sum(-1)
+    gap = float((chosen - times).abs().mean())
+    return loss, {"frame_time": float(loss.detach()), "frame_time_gap": gap}
