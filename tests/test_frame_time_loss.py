@@ -90,6 +90,8 @@ def test_the_frame_time_loss_trains_the_choice_of_frame_and_needs_demo_heights()
     assert isinstance(head, DemoPointer)
     assert head.readout.height_phase.grad is not None
     assert float(head.readout.height_phase.grad.abs().sum()) > 0
+    with torch.autocast("cpu", dtype=torch.bfloat16):  # [train] precision = "bf16"
+        assert model.compute_loss(batch)[1]["frame_time"] > 0
     torch.manual_seed(0)
     without = AwdaNet(AwdaConfig(**common, **CAMERA), load_backbone_weights=False)
     assert "frame_time" not in without.compute_loss(batch)[1]

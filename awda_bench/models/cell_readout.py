@@ -224,12 +224,16 @@ class CellReadout(nn.Module):
         :mod:`awda_bench.models.frame_time_loss`)."""
         if not self.demo_heights:
             raise ValueError("only a readout built with demo_heights=True chooses demo frames")
-        b, frames = heights.heights.shape
-        out = heights.frames.new_empty(b, self.waypoints, frames)
+        out: torch.Tensor | None = None
         for i in range(self.num_heads):
             rows = head == i
             if bool(rows.any()):
-                out[rows] = self._frame_logits(DemoHeights(*(t[rows] for t in heights)), i)
+                logits = self._frame_logits(DemoHeights(*(t[rows] for t in heights)), i)
+                if out is None:  # its dtype is the forward pass's (bfloat16 under autocast)
+                    out = logits.new_empty(len(head), *logits.shape[1:])
+                out[rows] = logits
+        if out is None:
+            raise ValueError(f"head indices {head.tolist()} name none of {self.num_heads} heads")
         return out
 
     def _ray_points(
