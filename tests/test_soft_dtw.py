@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from awda_bench.errors import UsageError
-from awda_bench.models.soft_dtw import soft_dtw, soft_dtw_divergence, squared_euclidean_cost
+from awda_bench.soft_dtw.core import soft_dtw, soft_dtw_divergence, squared_euclidean_cost
 
 
 def _reference(cost: list[list[float]], gamma: float) -> float:
@@ -129,7 +129,7 @@ def test_auto_picks_numpy_on_cpu_triton_on_cuda_torch_elsewhere(
 ) -> None:
     import importlib.util
 
-    from awda_bench.models.soft_dtw import auto_implementation
+    from awda_bench.soft_dtw.core import auto_implementation
 
     assert auto_implementation(torch.device("cpu")) == "numpy"
     assert auto_implementation(torch.device("cuda")) == "triton"  # torch's wheels bring triton

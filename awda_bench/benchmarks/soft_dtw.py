@@ -27,8 +27,8 @@ import torch
 from awda_bench.errors import UsageError
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import CELL_HEADS, AwdaConfig
-from awda_bench.models.soft_dtw import IMPLEMENTATIONS, auto_implementation
 from awda_bench.models.waypoint_loss import multi_waypoint_sdtw_loss
+from awda_bench.soft_dtw.core import IMPLEMENTATIONS, auto_implementation
 from awda_bench.training.loop import resolve_device
 
 NATIVE = {"cpu": ("numpy", "torch"), "cuda": ("torch", "triton")}

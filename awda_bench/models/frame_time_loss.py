@@ -32,12 +32,12 @@ import torch
 import torch.nn.functional as F
 
 from awda_bench.errors import UsageError
-from awda_bench.models.soft_dtw import soft_dtw_from_cost, squared_euclidean_cost
 from awda_bench.models.waypoint_loss import (
     interpolate_polyline,
     split_waypoint_sets,
     to_cost_space,
 )
+from awda_bench.soft_dtw.core import soft_dtw_from_cost, squared_euclidean_cost
 
 
 def waypoint_times(

@@ -24,7 +24,7 @@ from __future__ import annotations
 import torch
 
 from awda_bench.errors import UsageError
-from awda_bench.models.soft_dtw import soft_dtw
+from awda_bench.soft_dtw.core import soft_dtw
 
 
 def set_sizes(num_sets: int) -> list[int]:
@@ -86,7 +86,7 @@ def multi_waypoint_sdtw_loss(
         one_call: evaluate all sets in one ragged Soft-DTW call (polylines padded to the longest,
             ``S B`` rows, per-row lengths); ``False`` makes one call per set (the reference the
             ragged call is tested against; same values and gradients).
-        implementation: Soft-DTW implementation (:data:`~awda_bench.models.soft_dtw.IMPLEMENTATIONS`).
+        implementation: Soft-DTW implementation (:data:`~awda_bench.soft_dtw.core.IMPLEMENTATIONS`).
 
     Returns:
         ``(loss, per_set)``: the scalar loss and the batch-mean Soft-DTW of each set ``(S,)``.

@@ -2,10 +2,10 @@ r"""The Soft-DTW recursion tables in torch ops: the reference forward and backwa
 
 Both walk the anti-diagonals of the table in a Python loop (all cells with ``i + j = d`` are
 independent), vectorized over the batch and the diagonal; the recursions themselves, the ragged
-``lengths`` convention and the gradient are stated in :mod:`awda_bench.models.soft_dtw`, which
+``lengths`` convention and the gradient are stated in :mod:`awda_bench.soft_dtw.core`, which
 dispatches to them (``implementation="torch"``). :func:`backward_tables` sets up the padded
 tables a backward recursion reads, shared with the fused kernel
-(:mod:`awda_bench.models.soft_dtw_triton`), so the two agree to rounding.
+(:mod:`awda_bench.soft_dtw.triton_kernel`), so the two agree to rounding.
 """
 
 from __future__ import annotations

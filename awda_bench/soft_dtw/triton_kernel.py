@@ -1,7 +1,7 @@
 # mypy: disable-error-code="no-untyped-def"
 r"""Fused Soft-DTW recursions as Triton kernels: one program per sample, every anti-diagonal inside.
 
-The reference implementation (:func:`awda_bench.models.soft_dtw_tables.soft_dtw_forward_table`)
+The reference implementation (:func:`awda_bench.soft_dtw.tables.soft_dtw_forward_table`)
 walks the ``N + M - 1`` anti-diagonals in a Python loop; on a GPU each diagonal is a handful of tiny
 kernel launches, forward and backward, and the multi-waypoint loss of a paper-scale AWDA step spent
 ~348 ms of ~470 ms there (issue 13, one H100). Here each sample's whole recursion is **one**
@@ -30,7 +30,7 @@ import triton
 import triton.language as tl
 from triton.runtime.interpreter import InterpretedFunction
 
-from awda_bench.models.soft_dtw_tables import backward_tables
+from awda_bench.soft_dtw.tables import backward_tables
 
 
 def _forward_kernel(cost_ptr, r_ptr, n, m, gamma_ptr, BLOCK: tl.constexpr):  # noqa: N803
@@ -116,7 +116,7 @@ def _block(rows: int) -> int:
 
 
 def forward_table(cost: torch.Tensor, gamma: float) -> torch.Tensor:
-    """Same table as :func:`~awda_bench.models.soft_dtw_tables.soft_dtw_forward_table`, in one
+    """Same table as :func:`~awda_bench.soft_dtw.tables.soft_dtw_forward_table`, in one
     launch."""
     cost = cost.contiguous()
     b, n, m = cost.shape
@@ -131,7 +131,7 @@ def forward_table(cost: torch.Tensor, gamma: float) -> torch.Tensor:
 def backward_table(
     cost: torch.Tensor, r: torch.Tensor, gamma: float, lengths: torch.Tensor | None
 ) -> torch.Tensor:
-    """Same ``E`` as :func:`~awda_bench.models.soft_dtw_tables.soft_dtw_backward_table`, in one
+    """Same ``E`` as :func:`~awda_bench.soft_dtw.tables.soft_dtw_backward_table`, in one
     launch."""
     b, n, m = cost.shape
     c, rr, e, lengths = backward_tables(cost, r, lengths)

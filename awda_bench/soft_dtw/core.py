@@ -34,8 +34,8 @@ every sample's value at ``R[n_b, M]``; the backward recursion is seeded at ``(n_
 sample and rows past ``n_b`` get ``E = 0``. This is what lets the multi-waypoint loss evaluate its
 5 polylines of different lengths in one call: 5x fewer anti-diagonal iterations (the Python loop
 is the cost of this implementation, not the arithmetic). The torch recursions (the reference) are
-:mod:`awda_bench.models.soft_dtw_tables`; ``implementation="triton"`` runs both recursions as one
-fused Triton kernel launch each (:mod:`awda_bench.models.soft_dtw_triton`), tested against that
+:mod:`awda_bench.soft_dtw.tables`; ``implementation="triton"`` runs both recursions as one
+fused Triton kernel launch each (:mod:`awda_bench.soft_dtw.triton_kernel`), tested against that
 reference; the ``numpy`` implementation is this module's own.
 """
 
@@ -48,7 +48,7 @@ import numpy as np
 import torch
 
 from awda_bench.errors import UsageError
-from awda_bench.models.soft_dtw_tables import soft_dtw_backward_table, soft_dtw_forward_table
+from awda_bench.soft_dtw.tables import soft_dtw_backward_table, soft_dtw_forward_table
 
 
 def squared_euclidean_cost(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
@@ -167,9 +167,9 @@ class _SoftDtwFunction(torch.autograd.Function):
             values = r[lens + m, lens, np.arange(b)]
             return torch.from_numpy(values).to(dtype=cost.dtype, device=cost.device)
         if impl == "triton":
-            from awda_bench.models import soft_dtw_triton
+            from awda_bench.soft_dtw import triton_kernel
 
-            r_t = soft_dtw_triton.forward_table(cost_d, gamma)
+            r_t = triton_kernel.forward_table(cost_d, gamma)
         else:
             r_t = soft_dtw_forward_table(cost_d, gamma)
         if lengths is None:
@@ -189,9 +189,9 @@ class _SoftDtwFunction(torch.autograd.Function):
             cost, r_t, *rest = ctx.saved_tensors
             lengths = rest[0] if rest else None
             if ctx.impl == "triton":
-                from awda_bench.models import soft_dtw_triton
+                from awda_bench.soft_dtw import triton_kernel
 
-                e = soft_dtw_triton.backward_table(cost, r_t, ctx.gamma, lengths)
+                e = triton_kernel.backward_table(cost, r_t, ctx.gamma, lengths)
             else:
                 e = soft_dtw_backward_table(cost, r_t, ctx.gamma, lengths)
         return grad_output.view(-1, 1, 1) * e, None, None, None
