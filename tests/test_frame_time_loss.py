@@ -58,16 +58,17 @@ def test_the_loss_is_least_at_the_matched_frame_and_pulls_the_choice_there() -> 
     right = torch.full((1, 3, frames), -5.0)
     right[0, torch.arange(3), matched] = 5.0
     wrong = right.roll(1, dims=-1)
-    low, info = frame_time_loss(right, waypoints, trajectory, **SETS)
-    high, _ = frame_time_loss(wrong, waypoints, trajectory, **SETS)
+    times = waypoint_times(waypoints, trajectory, **SETS)
+    low, info = frame_time_loss(right, times)
+    high, _ = frame_time_loss(wrong, times)
     assert float(low) < 0.01 < 5.0 < float(high)
     assert info["frame_time_gap"] < 0.03
     logits = torch.zeros(1, 3, frames, requires_grad=True)
-    frame_time_loss(logits, waypoints, trajectory, **SETS)[0].backward()
+    frame_time_loss(logits, times)[0].backward()
     assert logits.grad is not None
     assert torch.equal(logits.grad[0].argmin(-1), matched)  # descent raises the matched frame
     with pytest.raises(UsageError, match="frame logits"):
-        frame_time_loss(torch.zeros(1, 2, frames), waypoints, trajectory, **SETS)
+        frame_time_loss(torch.zeros(1, 2, frames), times)
 
 
 def test_the_frame_time_loss_trains_the_choice_of_frame_and_needs_demo_heights() -> None:

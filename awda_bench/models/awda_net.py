@@ -39,7 +39,7 @@ from awda_bench.models.config import CELL_HEADS, AwdaConfig
 from awda_bench.models.demo_pointer import DemoPointer, PointerOutput
 from awda_bench.models.demo_to_scene import DemoToScene
 from awda_bench.models.frame_encoder import feature_map_size
-from awda_bench.models.frame_time_loss import frame_time_loss
+from awda_bench.models.frame_time_loss import frame_time_loss, waypoint_times
 from awda_bench.models.identification_loss import (
     hand_loss,
     height_loss,
@@ -218,15 +218,14 @@ class AwdaNet(nn.Module):
         waypoints = waypoints.float()
         if pointed is not None:
             pointed = PointerOutput._make(t.float() if t is not None else None for t in pointed)
+        polylines = {
+            "num_sets": cfg.num_waypoint_sets,
+            "points_per_segment": cfg.points_per_segment,
+            "gamma": cfg.gamma,
+            "attribute_scale": cfg.attribute_scale,
+        }
         with torch.autocast(waypoints.device.type, enabled=False):
-            loss, per_set = multi_waypoint_sdtw_loss(
-                waypoints,
-                batch["trajectory"],
-                num_sets=cfg.num_waypoint_sets,
-                points_per_segment=cfg.points_per_segment,
-                gamma=cfg.gamma,
-                attribute_scale=cfg.attribute_scale,
-            )
+            loss, per_set = multi_waypoint_sdtw_loss(waypoints, batch["trajectory"], **polylines)
             info = {f"sdtw_set{j + 1}": float(v) for j, v in enumerate(per_set.detach())}
             if pointed is not None:
                 found, found_info = identification_loss(
@@ -259,15 +258,8 @@ class AwdaNet(nn.Module):
                     loss = loss + cfg.identification_weight * height
                     info.update(height_info)
                 if pointed.frame_logits is not None and cfg.demo_frame_time_weight > 0.0:
-                    when, when_info = frame_time_loss(
-                        pointed.frame_logits,
-                        waypoints,
-                        batch["trajectory"],
-                        num_sets=cfg.num_waypoint_sets,
-                        points_per_segment=cfg.points_per_segment,
-                        gamma=cfg.gamma,
-                        attribute_scale=cfg.attribute_scale,
-                    )
+                    times = waypoint_times(waypoints, batch["trajectory"], **polylines)
+                    when, when_info = frame_time_loss(pointed.frame_logits, times)
                     loss = loss + cfg.demo_frame_time_weight * when
                     info.update(when_info)
                 if pointed.put_logits is not None and pointed.target_logits is not None:

@@ -77,31 +77,17 @@ def frame_targets(times: torch.Tensor, frames: int) -> torch.Tensor:
 
 
 def frame_time_loss(
-    frame_logits: torch.Tensor,
-    waypoints: torch.Tensor,
-    trajectory: torch.Tensor,
-    *,
-    num_sets: int,
-    points_per_segment: int,
-    gamma: float,
-    attribute_scale: float,
+    frame_logits: torch.Tensor, times: torch.Tensor
 ) -> tuple[torch.Tensor, dict[str, float]]:
     """Cross-entropy of the choice of demo frame ``frame_logits (B, W, Td)`` against the frames
-    at each waypoint's matched time (module docstring), and what it reports: the loss and the
-    mean |chosen - matched| fraction of the episode (``frame_time_gap``)."""
-    if frame_logits.dim() != 3 or frame_logits.shape[:2] != waypoints.shape[:2]:
+    at each waypoint's matched time ``times (B, W)`` (:func:`waypoint_times`), and what it
+    reports: the loss and the mean |chosen - matched| fraction of the episode
+    (``frame_time_gap``)."""
+    if frame_logits.dim() != 3 or frame_logits.shape[:2] != times.shape:
         raise UsageError(
-            f"frame logits (B, W, Td) must match waypoints (B, W, D): "
-            f"{tuple(frame_logits.shape)} vs {tuple(waypoints.shape)}"
+            f"frame logits (B, W, Td) must match the waypoints' times (B, W): "
+            f"{tuple(frame_logits.shape)} vs {tuple(times.shape)}"
         )
-    times = waypoint_times(
-        waypoints,
-        trajectory,
-        num_sets=num_sets,
-        points_per_segment=points_per_segment,
-        gamma=gamma,
-        attribute_scale=attribute_scale,
-    )
     frames = frame_logits.shape[-1]
     target = frame_targets(times, frames)
     log_choice = F.log_softmax(frame_logits.float(), dim=-1)
