@@ -47,7 +47,11 @@ from awda_bench.models.identification_loss import (
     place_loss,
 )
 from awda_bench.models.trunk import VisualTrunk
-from awda_bench.models.waypoint_loss import multi_waypoint_sdtw_loss, split_waypoint_sets
+from awda_bench.models.waypoint_loss import (
+    PolylineArgs,
+    multi_waypoint_sdtw_loss,
+    split_waypoint_sets,
+)
 
 if TYPE_CHECKING:
     from collections.abc import Mapping
@@ -218,7 +222,7 @@ class AwdaNet(nn.Module):
         waypoints = waypoints.float()
         if pointed is not None:
             pointed = PointerOutput._make(t.float() if t is not None else None for t in pointed)
-        polylines = {
+        polylines: PolylineArgs = {
             "num_sets": cfg.num_waypoint_sets,
             "points_per_segment": cfg.points_per_segment,
             "gamma": cfg.gamma,

@@ -21,10 +21,22 @@ sets.
 
 from __future__ import annotations
 
+from typing import TypedDict
+
 import torch
 
 from awda_bench.errors import UsageError
 from awda_bench.soft_dtw.core import soft_dtw
+
+
+class PolylineArgs(TypedDict):
+    """The keyword arguments that say how waypoint sets become paths and meet a trajectory
+    (:func:`multi_waypoint_sdtw_loss`; :class:`AwdaConfig` holds them)."""
+
+    num_sets: int
+    points_per_segment: int
+    gamma: float
+    attribute_scale: float
 
 
 def set_sizes(num_sets: int) -> list[int]:
