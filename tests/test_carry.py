@@ -3,11 +3,15 @@
 Fast: the tally's rules on a scripted fake scene, the episode record, the report's table (the
 store's columns: test_results_store.py). Slow: the stacking scene with its scripted expert as
 is (placed), told to open its gripper as soon as it has lifted cube A (off target) and never to
-open it (held).
+open it (held); Meta-World's pick-place-wall placed and let go early, button-press untallied
+(through ``.venv-metaworld``'s interpreter).
 """
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +20,7 @@ import pandas as pd
 import pytest
 import torch
 from harness_fakes import FakeEnv, SkillPolicy, write_fake_suite
+from metaworld_env import metaworld_python, needs_metaworld
 from task_env_helpers import make_task_env, run_expert, task_env_fixture
 
 from awda_bench.episode import EpisodeSpec
@@ -23,6 +28,7 @@ from awda_bench.evaluation.carry import CARRY_OUTCOMES, RELEASE_STEPS, CarryTall
 from awda_bench.evaluation.episode_runner import run_episode
 from awda_bench.experts.stack_block import StackBlockExpert
 from awda_bench.reporting.aggregate import carry_analysis
+from awda_bench.runtimes import PROJECT_ROOT
 from awda_bench.suites import load_suite
 
 
@@ -211,3 +217,67 @@ def test_the_stacking_expert_told_to_let_go_early_or_never(env, grip: float, out
     if outcome == "off_target":  # let go right after the lift, where A was picked up
         assert tally.release is not None and tally.release.xy_m > env.unwrapped.layout.edge_m
         assert not tally.release.closed
+
+
+METAWORLD_CARRIES = r"""
+import json
+import numpy as np
+from awda_bench.evaluation.carry import CarryTally
+from awda_bench.metaworld.env import MetaWorldEnv
+from awda_bench.metaworld.expert import expert_action, task_policy
+from awda_bench.suites import load_suite
+
+suite = load_suite("metaworld")
+index = {suite.task(t).name: t for t in suite.held_out}
+env, out = MetaWorldEnv(suite), {}
+for name, let_go in (("pick-place-wall-v3", False), ("pick-place-wall-v3", True),
+                     ("button-press-v3", False)):
+    obs, info = env.reset(seed=3, options={"task": index[name]})
+    tally, policy, success, after = CarryTally.for_env(env), task_policy(name), False, 0
+    if tally is None:
+        out[name] = None
+        continue
+    # the expert closes its hand on the way down, so the env's latch (reached before the first
+    # grip) stays off: the carry starts here once the puck is 5 cm up
+    start_z, lifted = float(env.target_position()[0, 2]), False
+    for _step in range(suite.horizon_steps):
+        action = expert_action(policy, obs)[0]
+        if let_go and lifted:
+            after += 1
+            action = np.array([0.0, 0.0, 0.0, -1.0]) if after > 5 else action
+        obs, _, _, _, info = env.step(action)
+        lifted |= float(env.target_position()[0, 2]) - start_z > 0.05
+        tally.after_step(action, lifted)
+        success |= bool(info["success"])
+        if success or after > 20:
+            break
+    release = tally.release
+    out[f"{name} {let_go}"] = {
+        "goal": tally.goal, "outcome": tally.outcome(lifted, success),
+        "release": None if release is None else [release.xy_m, release.dz_m, release.closed],
+    }
+env.close()
+print(json.dumps(out))
+"""
+
+
+@pytest.mark.slow
+@needs_metaworld
+def test_metaworld_carries_are_tallied_and_its_pushes_are_not() -> None:
+    """Meta-World answers the tally's questions too (numpy, a finger pad's touch as the hold):
+    the expert places pick-place-wall's puck; told to open its hand five steps after the lift it
+    lets go where it picked the puck up, off target; button-press has no place goal."""
+    python = metaworld_python()
+    assert python is not None
+    env = {**os.environ, "PYTHONPATH": str(PROJECT_ROOT), "MUJOCO_GL": "egl"}
+    done = subprocess.run(
+        [python, "-c", METAWORLD_CARRIES], capture_output=True, text=True, env=env, timeout=600
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    out = json.loads(done.stdout.strip().splitlines()[-1])
+    assert out["button-press-v3"] is None
+    placed, dropped = out["pick-place-wall-v3 False"], out["pick-place-wall-v3 True"]
+    assert placed["outcome"] == "placed" and len(placed["goal"]) == 3
+    assert dropped["outcome"] == "off_target"
+    xy_m, _, closed = dropped["release"]
+    assert xy_m > 0.07 and not closed  # Meta-World's success radius for pick-place-wall

@@ -20,13 +20,17 @@ without a hold is the release, and the target's position then is compared with i
     release_xy_m = |target_xy - goal_xy| at the release     release_dz_m = target_z - goal_z
 
 ``carry`` is ``None`` for an episode that never grasped (the grasp analysis covers those) and on
-tasks without a place goal (doors, drawers, buttons, Meta-World).
+tasks without a place goal (doors, drawers, buttons, Meta-World's pushes). Meta-World's carries
+(pick-place-wall, sweep-into and their siblings: ``awda_bench.metaworld.env.PLACE_TOLERANCE_M``)
+answer the same questions in numpy: a hold there is a finger pad touching the object.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any
+
+import numpy as np
 
 CARRY_OUTCOMES: tuple[str, ...] = ("placed", "on_target", "off_target", "dropped", "held")
 """The values of an episode record's ``carry`` (module docstring)."""
@@ -48,6 +52,14 @@ class Release:
     """``xy_m`` within the task's tolerance."""
     closed: bool
     """The gripper was commanded closed at that step (a drop, not a release)."""
+
+
+def _first_row(value: Any) -> np.ndarray:
+    """Env 0's row of a batched answer, as float64 numpy: ManiSkill answers in torch tensors,
+    Meta-World in numpy arrays."""
+    if hasattr(value, "detach"):
+        value = value.detach().cpu().numpy()
+    return np.asarray(value, dtype=np.float64)[0]
 
 
 class CarryTally:
@@ -83,14 +95,14 @@ class CarryTally:
             self.release = self._first_free
 
     def _where_now(self, action: Any) -> Release:
-        goal, tolerance = self.env.place_goal()
-        target = self.env.target_position()
-        xy = float((target[0, :2] - goal[0, :2]).norm())
+        goal, tolerance = (_first_row(t) for t in self.env.place_goal())
+        target = _first_row(self.env.target_position())
+        xy = float(np.linalg.norm(target[:2] - goal[:2]))
         closing = self.env.grip_commanded(action)
         return Release(
             xy_m=xy,
-            dz_m=float(target[0, 2] - goal[0, 2]),
-            over_goal=xy <= float(tolerance[0]),
+            dz_m=float(target[2] - goal[2]),
+            over_goal=xy <= float(tolerance),
             closed=closing is not None and bool(closing[0]),
         )
 

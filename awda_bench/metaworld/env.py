@@ -16,6 +16,9 @@
                                          LIFT_THRESHOLD_M above its start
     grip_outcome(a)                      what a closes the gripper on: the object (within
                                          REACH_THRESHOLD_M of the TCP: "target") or nothing
+    place_goal(), is_grasping_target(),  the carry analysis's questions (awda_bench.evaluation.
+    target_position(), grip_commanded(a) carry), on the tasks of PLACE_TOLERANCE_M: the goal
+                                         and its radius, the object touched by a finger pad
     episode_observations(spec, extras)   what an observation-only policy sees
 
 The obs ``reset`` and ``step`` return is Meta-World's 39-number state (with the goal): it reaches
@@ -42,6 +45,17 @@ LIFT_THRESHOLD_M = 0.05
 """*Grasped*: reached, then the object raised this far above its start height [m] (the ManiSkill
 tasks' ``lift_threshold_m``). Objects fixed to a fixture (buttons, handles, the lock) never rise:
 grasped stays False on those tasks."""
+
+PLACE_TOLERANCE_M: dict[str, float] = {
+    "pick-place-v3": 0.07,
+    "pick-place-wall-v3": 0.07,
+    "sweep-v3": 0.05,
+    "sweep-into-v3": 0.05,
+}
+"""The tasks whose object is carried to a goal and get the carry analysis
+(:mod:`awda_bench.evaluation.carry`): the held-out carries (pick-place-wall, sweep-into) and their
+training siblings, each with Meta-World's own success radius (object to goal, its
+``evaluate_state``), the tolerance a release is judged *over its goal* by."""
 
 MAX_PATH_LENGTH = 500
 """Steps after which a Meta-World env refuses to step without a reset (its ``max_path_length``)."""
@@ -141,6 +155,29 @@ class MetaWorldEnv:
         if not float(np.asarray(action, dtype=np.float64).reshape(-1)[3]) > 0:
             return np.array([-1])
         return np.array([0 if self._object_distance() <= REACH_THRESHOLD_M else 2])
+
+    def place_goal(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """``((1, 3) goal [m], (1,) tolerance [m])`` on a task that carries its object to a goal
+        (:data:`PLACE_TOLERANCE_M`: Meta-World's ``_target_pos`` and success radius), else
+        ``None``."""
+        tolerance = PLACE_TOLERANCE_M.get(self.task_name or "")
+        if tolerance is None:
+            return None
+        goal = np.asarray(self.task_env._target_pos, dtype=np.float64).reshape(1, 3)
+        return goal, np.array([tolerance])
+
+    def is_grasping_target(self) -> np.ndarray:
+        """``(1,)``: a finger pad touches the task's object (Meta-World's
+        ``touching_main_object``)."""
+        return np.array([bool(self.task_env.touching_main_object)])
+
+    def target_position(self) -> np.ndarray:
+        """``(1, 3)``: the task's object [m]."""
+        return self._object_pos().reshape(1, 3)
+
+    def grip_commanded(self, action: Any) -> np.ndarray:
+        """``(1,)``: ``action`` closes the gripper (``a[3] > 0``)."""
+        return np.array([float(np.asarray(action, dtype=np.float64).reshape(-1)[3]) > 0])
 
     def episode_observations(
         self, spec: EpisodeSpec, extras: dict[str, Any]
