@@ -63,9 +63,13 @@ COSTS = Costs()
 
 SUITE_COSTS: dict[str, dict[str, object]] = {
     "metaworld": {
-        # 2,250 training episodes (900 + 900 + 450 synthesized) in 48.8 min with 2 workers
-        # (learned/metaworld-small/): 1.30 s each
-        "collect_episode_s": 1.30,
+        # 2,250 training episodes (900 + 900 + 450 synthesized) in 23.6 min with 2 workers on
+        # an idle machine (sessions 39 and 43, from an empty directory): 0.63 s each (48.8 min,
+        # 1.30 s, in session 32, learned/metaworld-small/)
+        "collect_episode_s": 0.63,
+        # small's Full-1 on 14x14 cached maps with demo heights, the frame-time loss and a
+        # bfloat16 forward pass (session 45): 7.4-9.3 steps/s on 2 threads, 0.12 s a step
+        "frozen_step_s": 0.12,
         # awda: 1000 episodes in 8.5 min with 2 workers on the idle machine (metaworld-small/);
         # tosvi: 500-step episodes, 26.8-28.9 s each with one worker beside another benchmark
         # (docs/metaworld.md), 33-48 s with two workers beside the test suite (session 34)
