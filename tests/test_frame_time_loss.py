@@ -11,9 +11,10 @@ from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig
 from awda_bench.models.demo_pointer import DemoPointer
 from awda_bench.models.frame_time_loss import frame_targets, frame_time_loss, waypoint_times
+from awda_bench.models.waypoint_loss import PolylineArgs
 from tests.test_demo_pointer import CAMERA, POINTER_TRUNK, _grasping_batch
 
-SETS = {"num_sets": 2, "points_per_segment": 4, "gamma": 1e-3, "attribute_scale": 0.2}
+SETS: PolylineArgs = {"num_sets": 2, "points_per_segment": 4, "gamma": 1e-3, "attribute_scale": 0.2}
 
 
 def _rise_and_carry() -> torch.Tensor:
@@ -35,7 +36,7 @@ def test_each_waypoint_is_timed_where_its_path_meets_the_trajectory() -> None:
     trajectory = _rise_and_carry()
     grasp_logit = torch.tensor([[-8.0], [8.0], [8.0]])
     on_path = torch.cat((trajectory[0, [20, 5, 15], :3], grasp_logit), dim=-1)  # set 1, set 2
-    times = waypoint_times(on_path[None], trajectory, **SETS)
+    times = waypoint_times(on_path[None], trajectory, SETS)
     torch.testing.assert_close(times, torch.tensor([[1.0, 0.25, 0.75]]), atol=0.03, rtol=0)
 
 
@@ -58,7 +59,7 @@ def test_the_loss_is_least_at_the_matched_frame_and_pulls_the_choice_there() -> 
     right = torch.full((1, 3, frames), -5.0)
     right[0, torch.arange(3), matched] = 5.0
     wrong = right.roll(1, dims=-1)
-    times = waypoint_times(waypoints, trajectory, **SETS)
+    times = waypoint_times(waypoints, trajectory, SETS)
     low, info = frame_time_loss(right, times)
     high, _ = frame_time_loss(wrong, times)
     assert float(low) < 0.01 < 5.0 < float(high)

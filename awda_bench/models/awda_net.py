@@ -262,7 +262,7 @@ class AwdaNet(nn.Module):
                     loss = loss + cfg.identification_weight * height
                     info.update(height_info)
                 if pointed.frame_logits is not None and cfg.demo_frame_time_weight > 0.0:
-                    times = waypoint_times(waypoints, batch["trajectory"], **polylines)
+                    times = waypoint_times(waypoints, batch["trajectory"], polylines)
                     when, when_info = frame_time_loss(pointed.frame_logits, times)
                     loss = loss + cfg.demo_frame_time_weight * when
                     info.update(when_info)

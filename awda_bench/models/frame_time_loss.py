@@ -33,6 +33,7 @@ import torch.nn.functional as F
 
 from awda_bench.errors import UsageError
 from awda_bench.models.waypoint_loss import (
+    PolylineArgs,
     interpolate_polyline,
     split_waypoint_sets,
     to_cost_space,
@@ -41,19 +42,15 @@ from awda_bench.soft_dtw.core import soft_dtw_from_cost, squared_euclidean_cost
 
 
 def waypoint_times(
-    waypoints: torch.Tensor,
-    trajectory: torch.Tensor,
-    *,
-    num_sets: int,
-    points_per_segment: int,
-    gamma: float,
-    attribute_scale: float,
+    waypoints: torch.Tensor, trajectory: torch.Tensor, polylines: PolylineArgs
 ) -> torch.Tensor:
     """``tau`` ``(B, S(S+1)/2)`` in [0, 1]: the fraction of the agent's episode at which the
     Soft-DTW alignment matches each waypoint (module docstring; no gradient). Arguments as
     :func:`awda_bench.models.waypoint_loss.multi_waypoint_sdtw_loss`'s."""
-    target = to_cost_space(trajectory.detach().float(), attribute_scale, logits=False)
-    predicted = to_cost_space(waypoints.detach().float(), attribute_scale, logits=True)
+    num_sets, points_per_segment = polylines["num_sets"], polylines["points_per_segment"]
+    gamma, scale = polylines["gamma"], polylines["attribute_scale"]
+    target = to_cost_space(trajectory.detach().float(), scale, logits=False)
+    predicted = to_cost_space(waypoints.detach().float(), scale, logits=True)
     start = target[:, 0]
     times = []
     with torch.enable_grad():
