@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import pytest
 import torch
+from test_demo_pointer import CAMERA, POINTER_TRUNK, _grasping_batch
 
 from awda_bench.errors import UsageError
 from awda_bench.models.awda_net import AwdaNet
@@ -12,7 +13,6 @@ from awda_bench.models.config import AwdaConfig
 from awda_bench.models.demo_pointer import DemoPointer
 from awda_bench.models.frame_time_loss import frame_targets, frame_time_loss, waypoint_times
 from awda_bench.models.waypoint_loss import PolylineArgs
-from tests.test_demo_pointer import CAMERA, POINTER_TRUNK, _grasping_batch
 
 SETS: PolylineArgs = {"num_sets": 2, "points_per_segment": 4, "gamma": 1e-3, "attribute_scale": 0.2}
 
