@@ -9,6 +9,9 @@
 
 from __future__ import annotations
 
+import multiprocessing
+import os
+import signal
 from dataclasses import replace
 from pathlib import Path
 
@@ -357,3 +360,47 @@ def test_a_ray_voting_snapshot_refuses_another_camera() -> None:
     with pytest.raises(UsageError, match="camera"):
         check_camera(config, (k, moved))
     check_camera(AwdaConfig(trunk=LITE0), (k, moved))  # free votes: no camera to check
+
+
+class _StoppedEncoder(CountingEncoder):
+    """Sends its own process SIGTERM while encoding its third batch (``reproduce`` stopping a
+    stage mid-build)."""
+
+    def __call__(self, images: torch.Tensor) -> torch.Tensor:
+        out = super().__call__(images)
+        if self.frames > 0 and self.calls == 2:
+            os.kill(os.getpid(), signal.SIGTERM)
+        self.calls += 1
+        return out
+
+    calls = 0
+
+
+def _build_until_stopped(root: str) -> None:
+    data = CollectedData(Path(root))
+    load_or_build(data, LITE0, frames_needed(AwdaPairDataset(data, image_size=(64, 80))),
+                  _StoppedEncoder(), progress=False)  # fmt: skip
+
+
+@pytest.mark.slow
+def test_a_build_stopped_by_sigterm_resumes_where_it_stopped(tiny_copy: Path) -> None:
+    """SIGTERM mid-build exits with 143 and leaves the partial file readable: the next build
+    encodes only the episodes that were missing (one from nothing encodes them all)."""
+    child = multiprocessing.get_context("fork").Process(
+        target=_build_until_stopped, args=(str(tiny_copy),)
+    )
+    child.start()
+    child.join(timeout=300)
+    assert child.exitcode == 128 + signal.SIGTERM
+    data = CollectedData(tiny_copy)
+    pairs = AwdaPairDataset(data, image_size=(64, 80))
+    needed = frames_needed(pairs)
+    total = sum(len(i) for _, i in needed)
+    encoder = CountingEncoder()
+    resumed = load_or_build(data, LITE0, needed, encoder, progress=False)
+    assert 0 < encoder.frames < total  # the episodes encoded before the stop were kept
+    whole = CountingEncoder()
+    resumed.path.unlink()
+    load_or_build(data, LITE0, needed, whole, progress=False)
+    assert whole.frames == total
+    data.close()

@@ -31,11 +31,14 @@ T-OSVI's 2x2-pooled map (112 x 8 x 10) 18 KB, 18.5 MB per 1,000 frames on disk (
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import logging
 import os
-from collections.abc import Callable, Mapping, Sequence
+import signal
+import threading
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -173,10 +176,12 @@ def _encode_into(
     progress: bool,
 ) -> None:
     """Append every missing episode's features to the partial file ``path`` (an episode that
-    lacks some of the frames asked for is encoded again, with the union of both)."""
+    lacks some of the frames asked for is encoded again, with the union of both). The file is
+    flushed after every episode and closed on SIGTERM (:func:`_closing_on_sigterm`), so a
+    stopped build resumes where it stopped."""
     from tqdm import tqdm
 
-    with h5py.File(path, "a") as f:
+    with h5py.File(path, "a") as f, _closing_on_sigterm():
         if f.attrs.get("key") not in (None, key):
             raise CorruptFileError(f"partial feature cache {path} has another key")
         f.attrs["key"] = key
@@ -207,9 +212,31 @@ def _encode_into(
             group.create_dataset("indices", data=indices, fletcher32=True)
             group.create_dataset("features", data=maps.half().numpy(), fletcher32=True, chunks=True)
             group.attrs["done"] = True
+            f.flush()  # on disk episode by episode: a process killed later leaves it readable
             bar.update(len(indices))
         bar.close()
         f.attrs["complete"] = True
+
+
+@contextlib.contextmanager
+def _closing_on_sigterm() -> Iterator[None]:
+    """While open: SIGTERM (``reproduce`` stopping a stage, a cluster's scheduler) exits with
+    status 143 through ``SystemExit``, so the ``with`` around it closes the HDF5 file. Python's
+    default dies at once, and an HDF5 file left open is unreadable: a stopped T-OSVI build lost
+    its partial cache that way (session 45). Off the main thread (where no handler can be set)
+    nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, _frame: object) -> None:
+        raise SystemExit(128 + signum)
+
+    previous = signal.signal(signal.SIGTERM, stop)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def load_or_build(
