@@ -242,16 +242,16 @@ class CellReadout(nn.Module):
         head: int,
         camera: torch.Tensor,
         heights: DemoHeights | None = None,
+        when: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """Raw votes ``(b, L, N, 3 + k)`` read as (z, dx, dy, attributes) on the rays of each
         sample's ``camera`` ``(b,)`` -> attributed points: a waypoint's height is its own
-        parameter (plus, with ``heights``, its choice of the demo's hand heights) plus
+        parameter (plus, with ``heights`` and their choice ``when``, a blend of the demo's hand heights) plus
         at most ``height_offset_m`` from the cell (and the point at most ``offset_m`` off its ray
         horizontally), so that votes start ordered along the image (a free height per cell would
         scatter them)."""
         height = self.height[head].view(1, 1, -1, 1)  # (1, 1, N, 1)
-        if heights is not None:
-            when = self._frame_logits(heights, head)
+        if heights is not None and when is not None:
             chosen = torch.einsum("bnt,bt->bn", torch.softmax(when, dim=-1), heights.heights)
             height = height + chosen[:, None, :, None]  # (b, 1, N, 1)
         z = height + self.height_offset_m * torch.tanh(votes[..., :1])
@@ -306,10 +306,12 @@ class CellReadout(nn.Module):
         camera: torch.Tensor | None = None,
         path: HandPath | None = None,
         heights: DemoHeights | None = None,
+        frame_logits: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """``camera`` ``(B,)``: each sample's camera index (``None``: all the first);
         ``heights``: the demo's hand heights (a readout built with ``demo_heights`` takes them,
-        and only such a one)."""
+        and only such a one); ``frame_logits``: their :meth:`frame_logits` when the caller has
+        them already (computed here otherwise)."""
         if (heights is None) == self.demo_heights:
             raise ValueError(
                 "a readout built with demo_heights=True takes heights, and only such a one"
@@ -321,6 +323,8 @@ class CellReadout(nn.Module):
         if path is not None:
             context = path.relative.flatten(1)[:, None].expand(-1, cells, -1)
             values_in = torch.cat((values_in, context), dim=-1)
+        if heights is not None and frame_logits is None:
+            frame_logits = self.frame_logits(heights, head)
         out = x.new_empty(b, self.waypoints, self.waypoint_dim)
         for i in range(self.num_heads):
             rows = head == i
@@ -339,6 +343,7 @@ class CellReadout(nn.Module):
                     i,
                     camera[rows],
                     None if heights is None else DemoHeights(*(t[rows] for t in heights)),
+                    None if frame_logits is None else frame_logits[rows],
                 )
             out[rows] = torch.einsum("bln,blnk->bnk", where, votes)
         return out

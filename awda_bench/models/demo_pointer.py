@@ -308,10 +308,12 @@ class DemoPointer(nn.Module):
                 path = self.hand_path(hand, moved, found)
             if self.height_value is not None:
                 heights = self.hand_heights(demo_cells, hand)
-        waypoints = self.readout(x, head, prior=prior, camera=camera, path=path, heights=heights)
         zeta = choice = None
         if heights is not None:
             zeta, choice = heights.heights, self.readout.frame_logits(heights, head)
+        waypoints = self.readout(
+            x, head, prior=prior, camera=camera, path=path, heights=heights, frame_logits=choice
+        )
         return PointerOutput(waypoints, moved, found, hand, put, target, zeta, choice)
 
     def forward(
