@@ -215,6 +215,11 @@ def test_a_finished_training_under_other_recipe_settings_is_refused(tmp_path: Pa
     trained_with(replace(today, train=replace(today.train, learning_rate=1e-3)))
     with pytest.raises(ProtocolMismatchError, match="train.learning_rate"):
         _plan(tmp_path, columns=("full-1",), steps=10)
+    # a replicate (--seed 1) resumes under its own seed and is refused under the recipe's
+    trained_with(replace(today, train=replace(today.train, seed=1)))
+    assert _plan(tmp_path, columns=("full-1",), steps=10, seed=1)["train full-1"].done  # type: ignore[attr-defined]
+    with pytest.raises(ProtocolMismatchError, match="train.seed"):
+        _plan(tmp_path, columns=("full-1",), steps=10)
 
 
 def test_leave_one_family_out_runs_can_share_one_collection(tmp_path: Path) -> None:

@@ -409,7 +409,8 @@ def _column_stages(plan: _Plan, key: str, planned_caches: set[str]) -> list[Stag
     config, column = plan.config, COLUMN_KEYS[key]
     ckpt = config.out / "checkpoints" / key
     step_s, encode_s = _train_costs(plan, key, planned_caches)
-    _check_trained_recipe(ckpt, plan.recipe.for_suite(config.suite))
+    trains = plan.recipe.for_suite(config.suite).with_schedule(config.steps, None, config.seed)
+    _check_trained_recipe(ckpt, trains)  # as ``train`` compares: --seed replaces [train] seed
     steps_done, target = _steps_done(ckpt), plan.target
     stages = [
         Stage(
