@@ -11,8 +11,14 @@ from awda_bench.errors import UsageError
 from awda_bench.models.awda_net import AwdaNet
 from awda_bench.models.config import AwdaConfig
 from awda_bench.models.demo_pointer import DemoPointer
-from awda_bench.models.frame_time_loss import frame_targets, frame_time_loss, waypoint_times
+from awda_bench.models.frame_time_loss import (
+    frame_targets,
+    frame_time_loss,
+    rule_times,
+    waypoint_times,
+)
 from awda_bench.models.waypoint_loss import PolylineArgs
+from awda_bench.waypoints import extract_waypoint_indices
 
 SETS: PolylineArgs = {"num_sets": 2, "points_per_segment": 4, "gamma": 1e-3, "attribute_scale": 0.2}
 
@@ -38,6 +44,24 @@ def test_each_waypoint_is_timed_where_its_path_meets_the_trajectory() -> None:
     on_path = torch.cat((trajectory[0, [20, 5, 15], :3], grasp_logit), dim=-1)  # set 1, set 2
     times = waypoint_times(on_path[None], trajectory, SETS)
     torch.testing.assert_close(times, torch.tensor([[1.0, 0.25, 0.75]]), atol=0.03, rtol=0)
+
+
+def test_the_rule_times_each_set_at_the_moments_the_gt_waypoints_rule_picks() -> None:
+    """``demo_frame_time_source = "rule"``: a set of K waypoints is timed at the rule's K steps
+    on the trajectory (set 1: the end; set 2: the approach corner and the end, the rule dropping
+    the grasp before the end when its mandatory steps exceed K), whatever is predicted."""
+    trajectory = _rise_and_carry()
+    times = rule_times(trajectory, num_sets=2)
+    torch.testing.assert_close(times, torch.tensor([[1.0, 0.05, 1.0]]))
+    sets = rule_times(trajectory.repeat(2, 1, 1), num_sets=5)
+    five = extract_waypoint_indices(trajectory[0, :, :3].numpy(), trajectory[0, :, 3:] > 0.5, K=5)
+    assert sets.shape == (2, 15)
+    torch.testing.assert_close(sets[:, 10:], torch.from_numpy(five / 20.0).float().expand(2, 5))
+    assert float(sets[0, 10:].diff().min()) > 0  # five distinct moments, in order
+    assert 0.25 in sets[0, 10:].tolist()  # the grasp is one of them
+    # a trajectory of 3 points has 2 steps to pick: a set of 5 repeats the last
+    short = rule_times(_rise_and_carry()[:, [0, 5, 20]], num_sets=5)[0, 10:]
+    torch.testing.assert_close(short, torch.tensor([0.5, 1.0, 1.0, 1.0, 1.0]))
 
 
 def test_frame_targets_weigh_the_two_frames_around_the_same_fraction_of_the_demo() -> None:
@@ -94,6 +118,13 @@ def test_the_frame_time_loss_trains_the_choice_of_frame_and_needs_demo_heights()
     assert float(head.readout.height_phase.grad.abs().sum()) > 0
     with torch.autocast("cpu", dtype=torch.bfloat16):  # [train] precision = "bf16"
         assert model.compute_loss(batch)[1]["frame_time"] > 0
+    ruled = AwdaNet(
+        AwdaConfig(**common, demo_frame_time_weight=1.0, demo_frame_time_source="rule", **CAMERA),
+        False,
+    )
+    assert ruled.compute_loss(batch)[1]["frame_time"] > 0
+    with pytest.raises(UsageError, match="demo_frame_time_source"):
+        AwdaConfig(**common, demo_frame_time_source="demo", **CAMERA)
     torch.manual_seed(0)
     without = AwdaNet(AwdaConfig(**common, **CAMERA), load_backbone_weights=False)
     assert "frame_time" not in without.compute_loss(batch)[1]

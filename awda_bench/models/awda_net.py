@@ -39,7 +39,7 @@ from awda_bench.models.config import CELL_HEADS, AwdaConfig
 from awda_bench.models.demo_pointer import DemoPointer, PointerOutput
 from awda_bench.models.demo_to_scene import DemoToScene
 from awda_bench.models.frame_encoder import feature_map_size
-from awda_bench.models.frame_time_loss import frame_time_loss, waypoint_times
+from awda_bench.models.frame_time_loss import frame_time_loss, rule_times, waypoint_times
 from awda_bench.models.identification_loss import (
     hand_loss,
     height_loss,
@@ -262,7 +262,11 @@ class AwdaNet(nn.Module):
                     loss = loss + cfg.identification_weight * height
                     info.update(height_info)
                 if pointed.frame_logits is not None and cfg.demo_frame_time_weight > 0.0:
-                    times = waypoint_times(waypoints, batch["trajectory"], polylines)
+                    times = (
+                        rule_times(batch["trajectory"], cfg.num_waypoint_sets)
+                        if cfg.demo_frame_time_source == "rule"
+                        else waypoint_times(waypoints, batch["trajectory"], polylines)
+                    )
                     when, when_info = frame_time_loss(pointed.frame_logits, times)
                     loss = loss + cfg.demo_frame_time_weight * when
                     info.update(when_info)

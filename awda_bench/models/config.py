@@ -36,6 +36,9 @@ CELL_HEADS: tuple[str, ...] = ("demo-to-scene", "demo-pointer")
 """Heads that take the backbone's feature maps and end in a choice of o_1's cells
 (:mod:`awda_bench.models.cell_readout`; camera rays when the config has a camera)."""
 
+FRAME_TIME_SOURCES: tuple[str, ...] = ("path", "rule")
+"""Where the frame-time loss takes each waypoint's moment (``AwdaConfig.demo_frame_time_source``)."""
+
 DEVICE_CHOICES: tuple[str, ...] = ("auto", "cpu", "cuda")
 LR_SCHEDULES: tuple[str, ...] = ("constant", "cosine")
 """Step-size schedules of the training loop (``TrainConfig.lr_schedule``)."""
@@ -252,6 +255,14 @@ class AwdaConfig:
     ``demo_heights`` snapshot before session 45): the choice learns from the Soft-DTW loss alone,
     and on Meta-World it stayed spread over the whole demo (recipe-study-metaworld.md, V17). A
     deviation: the reference has no such loss."""
+    demo_frame_time_source: str = "path"
+    """``demo_frame_time_weight``: where each waypoint's moment comes from. ``"path"`` (every
+    snapshot before session 46): when the predicted set's own path reaches it (Soft-DTW's
+    alignment), so a path that spends a waypoint on the descent teaches the choice that timing
+    (Meta-World's pick-place-wall grasped a waypoint late, recipe-study-metaworld.md, V18).
+    ``"rule"``: the moments the gt-waypoints rule picks on the agent's trajectory for a set of
+    that size (:func:`awda_bench.waypoints.extract_waypoint_indices`: grasp, release, the
+    approach corner, the corners of the carry), independent of the prediction."""
     ray_offset_m: float = 0.05
     """Cell heads voting on camera rays: how far [m] a cell's vote may move horizontally off its
     ray (``cell_readout``). 0.05: a waypoint is where the cells it points at are. Larger lets a
@@ -352,6 +363,13 @@ class AwdaConfig:
             "demo_frame_time_weight",
             self.demo_frame_time_weight,
             "0, or a positive weight with demo_heights = true",
+        )
+        check_field(
+            self.demo_frame_time_source in FRAME_TIME_SOURCES,
+            o,
+            "demo_frame_time_source",
+            self.demo_frame_time_source,
+            " or ".join(repr(v) for v in FRAME_TIME_SOURCES),
         )
         check_field(
             self.demo_height_unit_m > 0.0,
@@ -478,6 +496,7 @@ AWDA_TABLE_FIELDS: tuple[str, ...] = (
     "demo_heights",
     "demo_height_unit_m",
     "demo_frame_time_weight",
+    "demo_frame_time_source",
     "place_target",
     "place_target_pool",
     "place_target_match",

@@ -24,10 +24,19 @@ The alignment is read off the prediction (detached) and the trajectory, so the t
 the path: a waypoint the loss matches to the lift takes the demo's frame of the lift, and with it
 the demonstrator's height there. Demo and agent are episodes of one task, scripted to the same
 phases, so equal fractions of their episodes are the same moment of the task.
+
+``[model] demo_frame_time_source = "rule"`` takes ``tau`` from the agent's trajectory alone
+(:func:`rule_times`): a set of K waypoints is taught the K moments the gt-waypoints rule picks on
+it (:func:`awda_bench.waypoints.extract_waypoint_indices`), so the set's third waypoint on
+pick-and-place is the lift over the wall whatever the path does (with ``"path"`` a path that
+spends a waypoint on the descent teaches the choice that timing).
 """
 
 from __future__ import annotations
 
+import functools
+
+import numpy as np
 import torch
 import torch.nn.functional as F
 
@@ -35,10 +44,12 @@ from awda_bench.errors import UsageError
 from awda_bench.models.waypoint_loss import (
     PolylineArgs,
     interpolate_polyline,
+    set_sizes,
     split_waypoint_sets,
     to_cost_space,
 )
 from awda_bench.soft_dtw.core import soft_dtw_from_cost, squared_euclidean_cost
+from awda_bench.waypoints import extract_waypoint_indices
 
 
 def waypoint_times(
@@ -63,6 +74,28 @@ def waypoint_times(
             near = cost.detach()[:, points_per_segment::points_per_segment]
             times.append(near.masked_fill(~aligned, float("inf")).argmin(-1))
     return torch.cat(times, dim=1).to(target.dtype) / max(target.shape[1] - 1, 1)
+
+
+def rule_times(trajectory: torch.Tensor, num_sets: int) -> torch.Tensor:
+    """``tau`` ``(B, S(S+1)/2)`` in [0, 1] from the trajectory alone: for the set of K waypoints,
+    the fractions of the episode at the K steps the gt-waypoints rule picks on the agent's
+    trajectory ``(B, P, 3 + k)`` (its attributes those > 0.5; fewer steps than K repeat the
+    last). No gradient; each trajectory's are computed once (an episode stands in many batches)."""
+    points = trajectory.detach().float().cpu().numpy()
+    times = [_rule_times_of(sample.tobytes(), sample.shape, num_sets) for sample in points]
+    return torch.from_numpy(np.stack(times)).to(trajectory.device)
+
+
+@functools.lru_cache(maxsize=1 << 16)
+def _rule_times_of(raw: bytes, shape: tuple[int, int], num_sets: int) -> np.ndarray:
+    """:func:`rule_times` of one trajectory, given as its float32 bytes and shape."""
+    sample = np.frombuffer(raw, np.float32).reshape(shape)
+    path, attributes = sample[:, :3], sample[:, 3:] > 0.5
+    times = []
+    for k in set_sizes(num_sets):
+        picked = extract_waypoint_indices(path, attributes, K=k)
+        times.append(np.concatenate([picked, np.repeat(picked[-1:], k - len(picked))]))
+    return (np.concatenate(times) / max(len(path) - 1, 1)).astype(np.float32)
 
 
 def frame_targets(times: torch.Tensor, frames: int) -> torch.Tensor:
